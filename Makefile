@@ -1,0 +1,68 @@
+# Two commands do all setup on a fresh machine:
+#   make test   venv + pinned wheels + Debian packages + message build, then pytest
+#   (make demo arrives with the node suite)
+# Every step is stamped, so a second run with nothing changed goes straight to pytest.
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   ?= .venv
+BUILD  ?= build/cmake
+PY      = $(VENV)/bin/python
+STAMPS  = $(VENV)/.stamps
+PYTEST_ARGS ?=
+
+# Run-time environment: ament_index finds our share/ directory in the venv prefix.
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+
+.PHONY: test setup lint format bench-help clean distclean
+.DEFAULT_GOAL := test
+
+setup: $(STAMPS)/msgs
+
+test: setup
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+lint: $(STAMPS)/venv
+	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
+
+format: $(STAMPS)/venv
+	$(VENV)/bin/ruff format . && $(VENV)/bin/ruff check --fix .
+
+$(STAMPS)/python:
+	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ROS 2 Kilted wheels are cp311), found " + sys.version' \
+	  || { echo "set PYTHON=/path/to/python3.11"; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	@mkdir -p $(STAMPS) && touch $@
+
+# Debian packages the wheels need at run time: open3d dlopens libusb-1.0.
+$(STAMPS)/debian: | $(STAMPS)/python
+	@if ldconfig -p | grep -q 'libusb-1.0.so.0'; then echo "libusb-1.0 present"; \
+	elif command -v apt-get >/dev/null; then \
+	  echo "installing Debian package libusb-1.0-0 (needed by open3d)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null; \
+	else echo "libusb-1.0 is missing and apt-get is not available: install libusb-1.0 by hand"; exit 1; fi
+	@touch $@
+
+$(STAMPS)/venv: requirements.txt $(STAMPS)/debian
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	@touch $@
+
+# The messages are built with the very same CMake project `colcon build` uses, installed into
+# the venv prefix. The hand-written Python package is NOT copied in for this developer build
+# (TACTILE_DOCK_INSTALL_PYTHON=OFF): it is imported from the work tree, so edits need no reinstall.
+$(STAMPS)/msgs: $(STAMPS)/venv CMakeLists.txt package.xml $(wildcard msg/*.msg)
+	@mkdir -p $(BUILD)
+	PATH="$(abspath $(VENV))/bin:$$PATH" cmake -S . -B $(BUILD) -Wno-dev \
+	  -DCMAKE_PREFIX_PATH="$(abspath $(VENV))" -DCMAKE_INSTALL_PREFIX="$(abspath $(VENV))" \
+	  -DPython3_EXECUTABLE="$(abspath $(PY))" -DBUILD_TESTING=OFF \
+	  -DTACTILE_DOCK_INSTALL_PYTHON=OFF > $(BUILD)/configure.log 2>&1 \
+	  || { cat $(BUILD)/configure.log; exit 1; }
+	cmake --build $(BUILD) -j2 > $(BUILD)/build.log 2>&1 || { tail -50 $(BUILD)/build.log; exit 1; }
+	cmake --install $(BUILD) > $(BUILD)/install.log 2>&1 || { tail -50 $(BUILD)/install.log; exit 1; }
+	@touch $@
+
+clean:
+	rm -rf build .pytest_cache .hypothesis
+
+distclean: clean
+	rm -rf $(VENV)

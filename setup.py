@@ -1,0 +1,27 @@
+"""`pip install .` gives the ROS-free library and its tools (no rclpy, no messages).
+
+The ROS 2 package itself is built by CMakeLists.txt (colcon / ament_cmake): that build generates
+the messages and installs everything, nodes included. This file serves users who want the method
+(core, perception, benchmarks) in a plain Python environment, e.g. for offline analysis.
+"""
+
+from setuptools import setup
+
+setup(
+    name="tactile_dock_ros",
+    version="0.1.0",
+    description="Bayesian tactile exploration for compliant docking (ROS-free core library)",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    packages=[
+        "tactile_dock_ros",
+        "tactile_dock_ros.core",
+        "tactile_dock_ros.perception",
+        "tactile_dock_ros.tools",
+    ],
+    install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0"],
+    extras_require={
+        "perception": ["opencv-contrib-python-headless>=4.9", "open3d-cpu>=0.19"],
+        "plot": ["matplotlib>=3.8"],
+    },
+)

@@ -1,0 +1,1 @@
+"""The method, ROS-free: shape model, constraints, samplers, probabilistic simulation, planner."""

@@ -1,0 +1,1 @@
+"""Depth image to 2D terrain slice to Gaussian shape prior; ROS-free."""

@@ -1,0 +1,19 @@
+"""Test-run isolation for DDS: a random domain per run, localhost-only discovery.
+
+Set at import time so that every process a test starts inherits the same isolated domain.
+"""
+
+import os
+import random
+from pathlib import Path
+
+TEST_DIR = Path(__file__).resolve().parent
+REPO_ROOT = TEST_DIR.parent
+
+os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(100, 200))
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(TEST_DIR / "fastdds_profile.xml")
+# Child processes import the work-tree sources first, like pytest itself does.
+os.environ["PYTHONPATH"] = os.pathsep.join(
+    [str(REPO_ROOT), str(TEST_DIR), *filter(None, [os.environ.get("PYTHONPATH")])]
+)

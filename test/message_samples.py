@@ -1,0 +1,85 @@
+"""One instance of every custom message with non-default values in every field."""
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Vector3
+from std_msgs.msg import Header
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    ContactSegment,
+    DockingPlan,
+    ExecutionReport,
+    ShapeDistribution,
+    ShapeSamples,
+)
+
+
+def _header(sec: int) -> Header:
+    return Header(stamp=Time(sec=sec, nanosec=123_456_789), frame_id="dock_plane")
+
+
+def _segment(i: int, status: int) -> ContactSegment:
+    return ContactSegment(
+        header=_header(10 + i),
+        start=Point(x=0.1 * i, y=-0.25, z=0.0),
+        end=Point(x=0.1 * i + 0.05, y=-0.5, z=0.0),
+        status=status,
+        plan_id=7 + i,
+    )
+
+
+def build() -> dict:
+    """Message type name -> instance."""
+    statuses = [
+        ContactSegment.FREE,
+        ContactSegment.COLLIDE,
+        ContactSegment.STICK,
+        ContactSegment.SLIP_LEFT,
+        ContactSegment.SLIP_RIGHT,
+    ]
+    segments = [_segment(i, s) for i, s in enumerate(statuses)]
+    return {
+        "ShapeDistribution": ShapeDistribution(
+            header=_header(1),
+            num_vertices=3,
+            mean=[0.0, 0.0, 0.5, 0.1, 1.0, -0.2],
+            num_basis=2,
+            basis=[0.01 * k - 0.05 for k in range(12)],
+            closed=True,
+            friction=0.6,
+        ),
+        "ContactSegment": segments[3],
+        "ContactHistory": ContactHistory(header=_header(2), segments=segments),
+        "ShapeSamples": ShapeSamples(
+            header=_header(3),
+            num_vertices=2,
+            num_samples=3,
+            samples=[0.5 * k for k in range(12)],
+            method="hmc",
+            effective_sample_size=2.5,
+            history_length=4,
+            dropped_segments=[1, 3],
+            compute_time=0.125,
+        ),
+        "DockingPlan": DockingPlan(
+            header=_header(4),
+            plan_id=42,
+            decision=DockingPlan.GIVE_UP,
+            waypoints=[Point(x=1.0, y=2.0, z=0.0), Point(x=1.5, y=1.0, z=0.0)],
+            load_direction=Vector3(x=0.6, y=-0.8, z=0.0),
+            contact_force_threshold=5.5,
+            max_speed=0.05,
+            compliant=True,
+            docking_probability=0.75,
+            objective=0.5,
+            target_edge=17,
+            reason="best docking probability 0.0004 < threshold 0.001",
+        ),
+        "ExecutionReport": ExecutionReport(
+            header=_header(5),
+            plan_id=42,
+            outcome=ExecutionReport.CONTACT_FAILED,
+            segments=segments[:2],
+            stop_point=Point(x=0.3, y=-0.4, z=0.0),
+            detail="slipped right under the load",
+        ),
+    }
