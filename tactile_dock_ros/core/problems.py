@@ -1,0 +1,198 @@
+"""Benchmark docking problems in the spirit of the paper's figures (Sec. IV-F, V-A3, VI-A).
+
+Every problem is a terrain profile in a vertical plane (x right, y up, metres) with the solid
+below the profile, so vertices run right to left (CCW around the solid, see ``core.shape``). The
+camera sits below and to the right of the holds, as for a climber looking up: faces turned away
+from it (the tops of the ledges) are hidden and carry extra smooth shape uncertainty.
+
+``load`` is the unit direction in which the robot pushes on the hold during the loading move
+(the paper's f_load); docking succeeds where friction cancels it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import prior as prior_columns
+from .shape import GaussianShape
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A docking problem: prior over the terrain, load, friction and where the tool starts."""
+
+    name: str
+    prior: GaussianShape
+    load: np.ndarray  # (2,) unit vector
+    friction: float
+    start: np.ndarray  # (2,) metres
+    contact_resolution: float  # metres: the exploration-bonus width w of eq. (24)
+    sensor: np.ndarray  # (2,) camera position in the plane, metres
+    hidden: np.ndarray  # (n,) bool: vertices the camera cannot see
+
+    def sample_ground_truth(self, rng: np.random.Generator) -> np.ndarray:
+        """One terrain drawn from the prior: (n, 2) vertices."""
+        return self.prior.vertices(self.prior.sample_z(rng, 1))[0]
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """Terrain outline (left to right) and the uncertainty model applied to it."""
+
+    outline: list[tuple[float, float]]
+    n_vertices: int
+    load: tuple[float, float]
+    friction: float
+    start: tuple[float, float]
+    sensor: tuple[float, float]
+    sigma_xy: float = 0.01  # localization, metres
+    sigma_theta: float = np.deg2rad(1.0)  # localization about the sensor, radians
+    sigma_depth: float = 0.002  # per-vertex depth noise along the ray, metres
+    sigma_hidden: float = 0.015  # smooth deviation of hidden stretches, metres
+    hidden_length: float = 0.04  # its correlation length, metres
+    hidden_columns: int = 8
+    contact_resolution: float = 0.01
+
+
+def _resample(outline: np.ndarray, count: int) -> np.ndarray:
+    """Subdivide each outline segment in proportion to its length; keeps every corner."""
+    seg_len = np.linalg.norm(np.diff(outline, axis=0), axis=1)
+    extra = count - len(outline)
+    pieces = np.ones(len(seg_len), dtype=int)
+    if extra > 0:
+        share = seg_len / seg_len.sum() * extra
+        pieces += np.floor(share).astype(int)
+        remainder = extra - (pieces.sum() - len(seg_len))
+        pieces[np.argsort(share - np.floor(share))[::-1][:remainder]] += 1
+    points = [
+        p + np.outer(np.arange(k) / k, q - p)
+        for p, q, k in zip(outline[:-1], outline[1:], pieces, strict=True)
+    ]
+    return np.vstack([*points, outline[-1:]])
+
+
+def _build(name: str, spec: _Spec) -> Problem:
+    verts = _resample(np.array(spec.outline[::-1], float), spec.n_vertices)
+    sensor = np.array(spec.sensor, float)
+    normals = prior_columns.vertex_normals(verts)
+    hidden = np.einsum("ij,ij->i", normals, sensor - verts) <= 0.0
+    basis = np.hstack(
+        [
+            prior_columns.translation_columns(len(verts), spec.sigma_xy, spec.sigma_xy),
+            prior_columns.rotation_column(verts, sensor, spec.sigma_theta),
+            prior_columns.ray_columns(verts, sensor, np.full(len(verts), spec.sigma_depth)),
+            prior_columns.smooth_normal_columns(
+                verts, hidden, spec.sigma_hidden, spec.hidden_length, spec.hidden_columns
+            ),
+        ]
+    )
+    load = np.array(spec.load, float)
+    return Problem(
+        name=name,
+        prior=GaussianShape(verts.ravel(), basis, closed=False, friction=spec.friction),
+        load=load / np.linalg.norm(load),
+        friction=spec.friction,
+        start=np.array(spec.start, float),
+        contact_resolution=spec.contact_resolution,
+        sensor=sensor,
+        hidden=hidden,
+    )
+
+
+def _sloper() -> Problem:
+    """A single slope at the friction angle (Fig. 8): about half the truths are too steep.
+
+    The slope's angle is uncertain only through the rigid rotation, so a ground truth is feasible
+    roughly when the rotation makes the slope flatter than atan(mu).
+    """
+    mu = 0.5
+    rise = 0.7 * mu  # slope angle atan(mu) over 0.7 m
+    return _build(
+        "sloper",
+        _Spec(
+            outline=[(-0.35, -0.3), (-0.35, 0.2), (0.35, 0.2 - rise), (0.35, -0.3)],
+            n_vertices=12,
+            load=(0.0, -1.0),
+            friction=mu,
+            start=(0.0, 0.45),
+            sensor=(0.8, -0.6),
+            sigma_theta=np.deg2rad(4.0),
+            sigma_depth=0.0005,
+            sigma_hidden=0.0,
+            hidden_columns=0,
+        ),
+    )
+
+
+def _notch() -> Problem:
+    """A slope too steep to hold, with a small hidden notch half-way that can trap the tool."""
+    return _build(
+        "notch",
+        _Spec(
+            outline=[
+                (-0.3, -0.3),
+                (-0.3, 0.25),
+                (-0.04, 0.07),
+                (-0.02, 0.04),
+                (0.03, 0.05),
+                (0.3, -0.14),
+                (0.3, -0.3),
+            ],
+            n_vertices=24,
+            load=(0.0, -1.0),
+            friction=0.5,
+            start=(0.0, 0.45),
+            sensor=(0.8, -0.6),
+            sigma_hidden=0.01,
+        ),
+    )
+
+
+def _three_ledges() -> Problem:
+    """Three ledges on a wall (Fig. 11): 82 vertices, 81 edges, hidden ledge tops."""
+    return _build(
+        "three_ledges",
+        _Spec(
+            outline=[
+                (-0.6, -0.4),
+                (-0.6, 0.5),
+                (-0.42, 0.47),  # ledge 1: top slopes outward, marginal
+                (-0.4, 0.3),
+                (-0.22, 0.31),  # ledge 2: flat top with a lip
+                (-0.2, 0.34),
+                (-0.18, 0.12),
+                (0.0, 0.05),  # ledge 3: slopes outward more steeply
+                (0.02, -0.1),
+                (0.3, -0.2),
+                (0.3, -0.4),
+            ],
+            n_vertices=82,
+            load=(0.0, -1.0),
+            friction=0.5,
+            start=(0.2, 0.7),
+            sensor=(0.9, -0.8),
+        ),
+    )
+
+
+_REGISTRY: dict[str, Callable[[], Problem]] = {
+    "sloper": _sloper,
+    "notch": _notch,
+    "three_ledges": _three_ledges,
+}
+
+
+def names() -> list[str]:
+    """Problem names accepted by ``get``."""
+    return list(_REGISTRY)
+
+
+def get(name: str) -> Problem:
+    """The named problem; ValueError lists the valid names."""
+    try:
+        return _REGISTRY[name]()
+    except KeyError:
+        raise ValueError(f"unknown problem {name!r}; choose from {names()}") from None
