@@ -93,3 +93,15 @@ class GaussianShape:
     def with_mean_basis(self, mean: np.ndarray, basis: np.ndarray) -> GaussianShape:
         """Same topology and friction, new Gaussian (e.g. a posterior moment fit)."""
         return GaussianShape(mean, basis, self.closed, self.friction)
+
+    @classmethod
+    def from_samples(cls, samples: np.ndarray, closed: bool, friction: float) -> GaussianShape:
+        """Moment fit to vertex samples (N, n, 2): mean and A = centered^T / sqrt(N - 1).
+
+        The basis has N columns (rank <= N - 1); probabilistic simulation only needs A A^T.
+        """
+        x = np.asarray(samples, dtype=float).reshape(len(samples), -1)
+        if len(x) < 2:
+            raise ValueError("a moment fit needs at least 2 samples")
+        mean = x.mean(axis=0)
+        return cls(mean, (x - mean).T / np.sqrt(len(x) - 1), closed, friction)

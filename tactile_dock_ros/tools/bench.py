@@ -1,0 +1,67 @@
+"""Benchmarks that reproduce the paper's experiments; JSON out, medians over repetitions.
+
+    python -m tactile_dock_ros.tools.bench SUITE [--json OUT] [--repeats R] [--seed S] [...]
+
+Each suite is a module ``tactile_dock_ros.tools.bench_<suite>`` with ``add_arguments(parser)``
+and ``run(args) -> dict``; ``run`` prints a human-readable table as it goes and returns the
+JSON-serializable results, which are written to ``--json`` (and always include the command
+line, the machine and the software versions).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+SUITES = {
+    # suite name -> one-line description
+}
+
+
+def _environment() -> dict:
+    import numpy
+    import scipy
+
+    return {
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "machine": platform.machine(),
+        "processor": platform.processor() or platform.machine(),
+        "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m tactile_dock_ros.tools.bench", description=__doc__.split("\n")[0]
+    )
+    sub = parser.add_subparsers(dest="suite", required=True, metavar="SUITE")
+    modules = {}
+    for name, help_text in SUITES.items():
+        module = importlib.import_module(f"tactile_dock_ros.tools.bench_{name}")
+        suite_parser = sub.add_parser(name, help=help_text, description=module.__doc__)
+        suite_parser.add_argument("--json", type=Path, help="write the results to this file")
+        suite_parser.add_argument("--repeats", type=int, default=3, help="repetitions (median)")
+        suite_parser.add_argument("--seed", type=int, default=0, help="base random seed")
+        module.add_arguments(suite_parser)
+        modules[name] = module
+    args = parser.parse_args(argv)
+    if args.repeats < 1:
+        parser.error("--repeats must be >= 1")
+    results = modules[args.suite].run(args)
+    report = {"suite": args.suite, "argv": sys.argv, "environment": _environment(), **results}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2, default=float))
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
