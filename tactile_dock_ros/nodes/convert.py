@@ -1,0 +1,334 @@
+"""The one place where ROS messages become numpy / core types and back.
+
+Every ``*_from_msg`` function validates what it reads (array sizes, finiteness, known status
+values, unit vectors) and raises :class:`MessageError` with a message saying which field is
+wrong; nodes log that message and drop the input, so a malformed message never reaches the
+core or a node's state. Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
+
+The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
+not available everywhere this runs, so the transform is a node parameter, see design.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from geometry_msgs.msg import Point, Vector3
+from std_msgs.msg import Header
+
+from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    ContactSegment,
+    DockingPlan,
+    ExecutionReport,
+    ShapeDistribution,
+    ShapeSamples,
+)
+
+# Tolerance (dimensionless) on |load_direction| = 1 and on plane axis orthonormality.
+UNIT_TOLERANCE = 1e-3
+
+
+class MessageError(ValueError):
+    """A message that cannot be converted; the text names the offending field."""
+
+
+def _finite(name: str, values) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(array)):
+        raise MessageError(f"{name} holds NaN or inf")
+    return array
+
+
+def _points(name: str, points) -> np.ndarray:
+    """(k, 2) plane coordinates of a Point list; z is ignored (the plane has z = 0)."""
+    return _finite(name, [(p.x, p.y) for p in points]).reshape(-1, 2)
+
+
+def _point(xy) -> Point:
+    return Point(x=float(xy[0]), y=float(xy[1]), z=0.0)
+
+
+# --------------------------------------------------------------------------- plane embedding
+
+
+@dataclass(frozen=True)
+class PlaneFrame:
+    """The docking plane in the arm's base frame: origin (3,) metres, orthonormal axes (3,)."""
+
+    origin: np.ndarray
+    x_axis: np.ndarray
+    y_axis: np.ndarray
+
+    def __post_init__(self) -> None:
+        rows = np.array([self.origin, self.x_axis, self.y_axis], dtype=float)
+        if rows.shape != (3, 3) or not np.all(np.isfinite(rows)):
+            raise ValueError("plane origin and axes must be finite 3-vectors")
+        gram = rows[1:] @ rows[1:].T
+        if not np.allclose(gram, np.eye(2), atol=UNIT_TOLERANCE):
+            raise ValueError(f"plane axes must be orthonormal, got x={rows[1]}, y={rows[2]}")
+        for name, value in zip(("origin", "x_axis", "y_axis"), rows, strict=True):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def axes(self) -> np.ndarray:
+        """(2, 3): the plane axes as rows."""
+        return np.stack([self.x_axis, self.y_axis])
+
+    def point_to_plane(self, p3) -> np.ndarray:
+        """Base-frame point(s) (..., 3) -> plane coordinates (..., 2), dropping the normal part."""
+        return (np.asarray(p3, float) - self.origin) @ self.axes.T
+
+    def point_from_plane(self, p2) -> np.ndarray:
+        return self.origin + np.asarray(p2, float) @ self.axes
+
+    def vector_to_plane(self, v3) -> np.ndarray:
+        return np.asarray(v3, float) @ self.axes.T
+
+    def vector_from_plane(self, v2) -> np.ndarray:
+        return np.asarray(v2, float) @ self.axes
+
+
+def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
+    """geometry_msgs/PoseStamped -> tool position in the plane (2,) metres."""
+    p = msg.pose.position
+    return plane.point_to_plane(_finite("pose.position", [p.x, p.y, p.z]))
+
+
+def wrench_force(msg, plane: PlaneFrame) -> np.ndarray:
+    """geometry_msgs/WrenchStamped -> force in the plane (2,) newtons (torque is not used)."""
+    f = msg.wrench.force
+    return plane.vector_to_plane(_finite("wrench.force", [f.x, f.y, f.z]))
+
+
+def twist_velocity(msg, plane: PlaneFrame) -> np.ndarray:
+    """geometry_msgs/TwistStamped -> linear velocity in the plane (2,) m/s."""
+    v = msg.twist.linear
+    return plane.vector_to_plane(_finite("twist.linear", [v.x, v.y, v.z]))
+
+
+def vector3(v) -> Vector3:
+    return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]) if len(v) > 2 else 0.0)
+
+
+# --------------------------------------------------------------------------- shapes
+
+
+def shape_to_msg(shape: GaussianShape, header: Header) -> ShapeDistribution:
+    return ShapeDistribution(
+        header=header,
+        num_vertices=shape.n_vertices,
+        mean=shape.mean.tolist(),
+        num_basis=shape.n_basis,
+        basis=shape.basis.ravel().tolist(),
+        closed=bool(shape.closed),
+        friction=float(shape.friction),
+    )
+
+
+def shape_from_msg(msg: ShapeDistribution) -> GaussianShape:
+    n, m = int(msg.num_vertices), int(msg.num_basis)
+    if n < 2:
+        raise MessageError(f"num_vertices must be >= 2, got {n}")
+    if len(msg.mean) != 2 * n:
+        raise MessageError(f"mean has {len(msg.mean)} values, expected 2*num_vertices = {2 * n}")
+    if len(msg.basis) != 2 * n * m:
+        raise MessageError(f"basis has {len(msg.basis)} values, expected 2n*m = {2 * n * m}")
+    mean = _finite("mean", msg.mean)
+    basis = _finite("basis", msg.basis).reshape(2 * n, m)
+    try:
+        return GaussianShape(mean, basis, closed=bool(msg.closed), friction=float(msg.friction))
+    except ValueError as err:
+        raise MessageError(str(err)) from err
+
+
+# --------------------------------------------------------------------------- contact history
+
+
+def segments_to_msgs(history: History, header: Header, plan_ids=0) -> list[ContactSegment]:
+    """History -> ContactSegment[]; ``plan_ids`` is one id for all or one per segment."""
+    ids = np.broadcast_to(np.asarray(plan_ids, dtype=int), (len(history),))
+    return [
+        ContactSegment(header=header, start=_point(a), end=_point(b), status=int(s), plan_id=int(i))
+        for a, b, s, i in zip(history.a, history.b, history.status, ids, strict=True)
+    ]
+
+
+def history_from_segments(segments) -> History:
+    """ContactSegment[] -> History; unknown status, NaN or zero-length contact -> MessageError."""
+    a = _points("segment start", [s.start for s in segments])
+    b = _points("segment end", [s.end for s in segments])
+    try:
+        return History(a, b, np.array([s.status for s in segments], dtype=int))
+    except ValueError as err:
+        raise MessageError(str(err)) from err
+
+
+def history_to_msg(history: History, header: Header, plan_ids=0) -> ContactHistory:
+    return ContactHistory(header=header, segments=segments_to_msgs(history, header, plan_ids))
+
+
+# --------------------------------------------------------------------------- posterior samples
+
+
+def samples_to_msg(
+    vertices: np.ndarray,
+    header: Header,
+    method: str,
+    ess: float,
+    history_length: int,
+    dropped=(),
+    compute_time: float = 0.0,
+) -> ShapeSamples:
+    vertices = np.asarray(vertices, float)
+    return ShapeSamples(
+        header=header,
+        num_vertices=vertices.shape[1],
+        num_samples=vertices.shape[0],
+        samples=vertices.ravel().tolist(),
+        method=method,
+        effective_sample_size=float(ess),
+        history_length=int(history_length),
+        dropped_segments=[int(i) for i in dropped],
+        compute_time=float(compute_time),
+    )
+
+
+def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
+    """ShapeSamples -> (N, n, 2) vertices; sizes must agree and N, n must be positive."""
+    n, count = int(msg.num_vertices), int(msg.num_samples)
+    if n < 2 or count < 1:
+        raise MessageError(f"need num_vertices >= 2 and num_samples >= 1, got {n}, {count}")
+    if len(msg.samples) != count * 2 * n:
+        raise MessageError(
+            f"samples has {len(msg.samples)} values, expected num_samples*2n = {count * 2 * n}"
+        )
+    return _finite("samples", msg.samples).reshape(count, n, 2)
+
+
+# --------------------------------------------------------------------------- plans
+
+
+@dataclass(frozen=True)
+class PlanCommand:
+    """A validated DockingPlan: waypoints (L, 2) metres, load (2,) unit vector."""
+
+    plan_id: int
+    dock: bool
+    waypoints: np.ndarray
+    load: np.ndarray
+    force_threshold: float  # newtons
+    max_speed: float  # metres per second
+    compliant: bool
+    p_dock: float
+    objective: float
+    target_edge: int
+    reason: str
+
+
+def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
+    return DockingPlan(
+        header=header,
+        plan_id=int(command.plan_id),
+        decision=DockingPlan.DOCK if command.dock else DockingPlan.GIVE_UP,
+        waypoints=[_point(w) for w in command.waypoints],
+        load_direction=vector3(command.load),
+        contact_force_threshold=float(command.force_threshold),
+        max_speed=float(command.max_speed),
+        compliant=bool(command.compliant),
+        docking_probability=float(command.p_dock),
+        objective=float(command.objective),
+        target_edge=int(command.target_edge),
+        reason=command.reason,
+    )
+
+
+def plan_from_msg(msg: DockingPlan) -> PlanCommand:
+    """DockingPlan -> PlanCommand. A DOCK plan needs >= 2 distinct waypoints, a unit load,
+    positive force threshold and speed; a GIVE_UP plan may have no waypoints."""
+    if msg.decision not in (DockingPlan.DOCK, DockingPlan.GIVE_UP):
+        raise MessageError(f"unknown decision {msg.decision}")
+    dock = msg.decision == DockingPlan.DOCK
+    waypoints = _points("waypoints", msg.waypoints)
+    load = _finite("load_direction", [msg.load_direction.x, msg.load_direction.y])
+    scalars = _finite(
+        "thresholds", [msg.contact_force_threshold, msg.max_speed, msg.docking_probability]
+    )
+    if dock:
+        if len(waypoints) < 2:
+            raise MessageError(f"a DOCK plan needs >= 2 waypoints, got {len(waypoints)}")
+        if np.linalg.norm(waypoints[-1] - waypoints[-2]) <= 0.0:
+            raise MessageError("the loading move (last waypoint pair) has zero length")
+        if abs(np.linalg.norm(load) - 1.0) > UNIT_TOLERANCE:
+            raise MessageError(f"load_direction must be a unit vector, got {load}")
+        if scalars[0] <= 0 or scalars[1] <= 0:
+            raise MessageError("contact_force_threshold and max_speed must be > 0")
+    return PlanCommand(
+        plan_id=int(msg.plan_id),
+        dock=dock,
+        waypoints=waypoints,
+        load=load,
+        force_threshold=float(scalars[0]),
+        max_speed=float(scalars[1]),
+        compliant=bool(msg.compliant),
+        p_dock=float(scalars[2]),
+        objective=float(msg.objective),
+        target_edge=int(msg.target_edge),
+        reason=msg.reason,
+    )
+
+
+# --------------------------------------------------------------------------- execution reports
+
+OUTCOME_NAMES = {
+    ExecutionReport.DOCKED: "DOCKED",
+    ExecutionReport.CONTACT_FAILED: "CONTACT_FAILED",
+    ExecutionReport.NO_CONTACT: "NO_CONTACT",
+    ExecutionReport.ABORTED: "ABORTED",
+}
+
+
+@dataclass(frozen=True)
+class Report:
+    """A validated ExecutionReport: the segments as a History, stop point (2,) metres."""
+
+    plan_id: int
+    outcome: int
+    history: History
+    stop_point: np.ndarray
+    detail: str
+
+    @property
+    def outcome_name(self) -> str:
+        return OUTCOME_NAMES[self.outcome]
+
+
+def report_to_msg(report: Report, header: Header) -> ExecutionReport:
+    return ExecutionReport(
+        header=header,
+        plan_id=int(report.plan_id),
+        outcome=int(report.outcome),
+        segments=segments_to_msgs(report.history, header, report.plan_id),
+        stop_point=_point(report.stop_point),
+        detail=report.detail,
+    )
+
+
+def report_from_msg(msg: ExecutionReport) -> Report:
+    if msg.outcome not in OUTCOME_NAMES:
+        raise MessageError(f"unknown outcome {msg.outcome}")
+    return Report(
+        plan_id=int(msg.plan_id),
+        outcome=int(msg.outcome),
+        history=history_from_segments(msg.segments),
+        stop_point=_points("stop_point", [msg.stop_point])[0],
+        detail=msg.detail,
+    )
+
+
+def status_name(status: int) -> str:
+    return Status(status).name

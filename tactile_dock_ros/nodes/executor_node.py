@@ -1,0 +1,157 @@
+"""executor: runs DockingPlans on the arm as guarded moves and reports what it felt.
+
+Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped,
+F/T sensor); publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a
+plan runs, and ``execution_report`` (ExecutionReport) when it ends. The state machine and the
+safety checks are in ``nodes.guarded``; this file is the ROS glue.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.node import Node
+
+from tactile_dock_ros.core.history import History
+from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes.common import PLANE_TABLE, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
+from tactile_dock_ros.nodes.params import Param, declare
+
+PARAMS = [
+    *PLANE_TABLE,
+    Param("control_rate_hz", 100.0, "guarded-move control rate", "Hz", 1.0, 1000.0),
+    Param("max_speed", 0.1, "speed limit of any command", "m/s", 1e-4, 1.0),
+    Param("max_force", 40.0, "contact force limit: abort above it", "N", 0.1, 500.0),
+    Param("sensor_timeout", 0.5, "abort when pose or wrench is older than this", "s", 0.01, 10.0),
+    Param("workspace_min", [-1.0, -1.0], "workspace box lower corner (plane x, y)", "m", length=2),
+    Param("workspace_max", [1.0, 1.0], "workspace box upper corner (plane x, y)", "m", length=2),
+    Param("contact_resolution", 0.01, "length of reported contact segments", "m", 1e-4, 0.1),
+    Param("waypoint_tolerance", 0.002, "a waypoint counts as reached within this", "m", 1e-5, 0.05),
+    Param("slip_tolerance", 0.001, "displacement under load that counts as slip", "m", 1e-5, 0.05),
+    Param("load_speed", 0.02, "pushing speed of the stick/slip test", "m/s", 1e-4, 1.0),
+    Param("load_force", 12.0, "loading test pushes up to this force", "N", 0.1, 500.0),
+    Param("retreat_distance", 0.02, "back-off after a failed contact", "m", 0.0, 0.2),
+    Param("approach_gain", 4.0, "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
+    Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
+    Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
+]
+
+
+class ExecutorNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("executor", **kwargs)
+        self.p = declare(self, PARAMS)
+        if np.any(np.asarray(self.p.workspace_min) >= np.asarray(self.p.workspace_max)):
+            raise ValueError("parameter workspace_min must be below workspace_max")
+        self.plane = plane_frame(self.p)
+        self.limits = Limits(
+            np.asarray(self.p.workspace_min),
+            np.asarray(self.p.workspace_max),
+            self.p.max_speed,
+            self.p.max_force,
+            self.p.sensor_timeout,
+        )
+        self.settings = Settings(
+            contact_resolution=self.p.contact_resolution,
+            waypoint_tolerance=self.p.waypoint_tolerance,
+            slip_tolerance=self.p.slip_tolerance,
+            load_force=self.p.load_force,
+            load_speed=self.p.load_speed,
+            retreat_distance=self.p.retreat_distance,
+            approach_gain=self.p.approach_gain,
+        )
+        self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)
+        self.dt = 1.0 / self.p.control_rate_hz
+        self.tool: np.ndarray | None = None
+        self.pose_time = self.wrench_time = None
+        self.run: GuardedRun | None = None
+        self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
+        self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
+        self.create_subscription(
+            DockingPlan, "plan", guarded(self, "plan", self.on_plan), qos.EVENTS
+        )
+        self.create_subscription(
+            PoseStamped, "tool_pose", guarded(self, "tool pose", self.on_pose), qos.SENSOR
+        )
+        self.create_subscription(
+            WrenchStamped, "wrench", guarded(self, "wrench", self.on_wrench), qos.SENSOR
+        )
+        self.create_timer(self.dt, self.on_tick)
+
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        self.tool = convert.pose_position(msg, self.plane)
+        self.pose_time = self.now()
+
+    def on_wrench(self, msg: WrenchStamped) -> None:
+        force = convert.wrench_force(msg, self.plane)
+        self.wrench_time = self.now()
+        self.filter.add(self.wrench_time, force)
+
+    def on_plan(self, msg: DockingPlan) -> None:
+        plan = convert.plan_from_msg(msg)
+        if not plan.dock:
+            self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
+            return
+        if self.run is not None:
+            self.report(plan.plan_id, Outcome.ABORTED, "refused: another plan is running")
+            return
+        if self.tool is None:
+            self.report(plan.plan_id, Outcome.ABORTED, "refused: no tool pose received yet")
+            return
+        self.filter.reset()
+        self.run = GuardedRun(plan, self.tool, self.limits, self.settings, self.now())
+        self.get_logger().info(
+            f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
+        )
+
+    def on_tick(self) -> None:
+        run = self.run
+        if run is None:
+            return
+        t = self.now()
+        stamps = [s for s in (self.pose_time, self.wrench_time) if s is not None]
+        age = t - min(stamps) if len(stamps) == 2 else t - run.t_start
+        velocity = np.zeros(2)
+        if not run.done and not self.filter.ready:  # estimating the F/T bias at rest
+            if age > self.limits.sensor_timeout:
+                run.abort(f"sensor timeout: no F/T data for {age:.2f} s", self.tool)
+        elif not run.done:
+            velocity = run.step(t, self.tool, self.filter.value, age)
+            velocity = run.check_next(self.tool, velocity, self.dt)
+        self.command(velocity)
+        if run.done:
+            self.run = None
+            self.report(run.plan.plan_id, run.outcome, run.detail, run.history, run.stop_point)
+            self.get_logger().info(
+                f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
+                f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
+                f"max commanded speed {run.max_speed_commanded:.3f} m/s"
+            )
+
+    def command(self, velocity: np.ndarray) -> None:
+        msg = TwistStamped(header=header(self, self.p.base_frame_id))
+        v3 = self.plane.vector_from_plane(velocity)
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(x) for x in v3)
+        self.cmd_pub.publish(msg)
+
+    def report(self, plan_id, outcome, detail, history=None, stop_point=None) -> None:
+        stop = self.tool if stop_point is None else stop_point
+        report = convert.Report(
+            plan_id=plan_id,
+            outcome=outcome.value,
+            history=History() if history is None else history,
+            stop_point=np.zeros(2) if stop is None else stop,
+            detail=detail,
+        )
+        self.report_pub.publish(convert.report_to_msg(report, header(self, self.p.plane_frame_id)))
+        if outcome is Outcome.ABORTED:
+            self.get_logger().warn(f"plan {plan_id}: ABORTED: {detail}")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(ExecutorNode, args)

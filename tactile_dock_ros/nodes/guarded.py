@@ -1,0 +1,297 @@
+"""Guarded-move execution of a docking plan as a control-rate state machine (ROS-free).
+
+The executor node feeds :meth:`GuardedRun.step` with the tool position and the filtered,
+bias-free contact force in the docking plane; it returns the Cartesian velocity to command.
+Paper Sec. III-A2/3: each waypoint segment is a guarded move that stops when the contact force
+exceeds the plan's threshold; the last segment is the loading move, along f_load, where the
+stick/slip test decides docking.
+
+Decisions where the paper leaves the robot side open:
+
+* Stick/slip test: after contact on the loading move the tool keeps pushing along the load at
+  the plan speed until the force reaches ``load_force``. If the tool moved less than
+  ``slip_tolerance`` from the contact point it sticks (DOCKED, the tool holds there); otherwise
+  it slipped, left (CCW from the motion) or right (CW) by the sign of the cross product of the
+  motion and the displacement. A slip ends the attempt (the non-compliant docking model): the
+  executor does not follow a slide to a later stick.
+* Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
+  move, backed off by the contact resolution w from the contact point c, and a contact segment
+  c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
+  something) or STICK / SLIP_LEFT / SLIP_RIGHT (the loading move).
+* After any contact that did not dock the tool retreats ``retreat_distance`` against the move
+  direction, so the next plan starts in free space and the F/T bias can be re-estimated.
+* Safety, checked before every command: sensor age, tool inside the workspace box, force below
+  the limit, command speed below the limit, the next position (tool + v dt) inside the box, and
+  a time budget per plan. Any violation stops the run with ABORTED and the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.nodes.convert import PlanCommand
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Hard limits of the arm in the docking plane: box (2,) metres, speed m/s, force N, s."""
+
+    workspace_min: np.ndarray
+    workspace_max: np.ndarray
+    max_speed: float
+    max_force: float
+    sensor_timeout: float
+
+    def inside(self, p: np.ndarray) -> bool:
+        return bool(np.all(p >= self.workspace_min) and np.all(p <= self.workspace_max))
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Execution tuning: metres, newtons, seconds, 1/s."""
+
+    contact_resolution: float = 0.01
+    waypoint_tolerance: float = 0.002
+    slip_tolerance: float = 0.002
+    load_force: float = 12.0
+    load_speed: float = 0.02  # pushing speed of the stick/slip test
+    retreat_distance: float = 0.02
+    approach_gain: float = 4.0  # speed = min(max_speed, gain * remaining distance)
+    time_margin: float = 5.0  # time budget = 3 * path length / speed + margin
+
+
+class Outcome(Enum):
+    """Values equal the ExecutionReport constants."""
+
+    DOCKED = 0
+    CONTACT_FAILED = 1
+    NO_CONTACT = 2
+    ABORTED = 3
+
+
+class _Phase(Enum):
+    MOVE = "move"
+    LOAD_TEST = "load test"
+    RETREAT = "retreat"
+    DONE = "done"
+
+
+def refusal(plan: PlanCommand, tool: np.ndarray, limits: Limits, settings: Settings) -> str:
+    """Why the plan must not run ('' when it may): limits are checked before moving."""
+    if plan.max_speed > limits.max_speed:
+        return f"plan speed {plan.max_speed:.3f} m/s exceeds the limit {limits.max_speed} m/s"
+    if max(plan.force_threshold, settings.load_force) > limits.max_force:
+        return (
+            f"contact threshold {plan.force_threshold:.1f} N / load force "
+            f"{settings.load_force:.1f} N exceed the force limit {limits.max_force} N"
+        )
+    if plan.force_threshold >= settings.load_force:
+        return f"contact threshold {plan.force_threshold:.1f} N must be below the load force"
+    outside = [i for i, w in enumerate(plan.waypoints) if not limits.inside(w)]
+    if outside:
+        return f"waypoints {outside} lie outside the workspace box"
+    if not limits.inside(tool):
+        return f"tool at {np.round(tool, 3).tolist()} is outside the workspace box"
+    return ""
+
+
+@dataclass
+class GuardedRun:
+    """One plan's execution. Call :meth:`step` at the control rate until ``done``."""
+
+    plan: PlanCommand
+    tool: np.ndarray  # (2,) where the run starts
+    limits: Limits
+    settings: Settings
+    t_start: float  # seconds
+    outcome: Outcome | None = None
+    detail: str = ""
+    stop_point: np.ndarray | None = None
+    max_speed_commanded: float = 0.0
+    _phase: _Phase = _Phase.MOVE
+    _path: np.ndarray = field(init=False)
+    _move: int = 0
+    _move_start: np.ndarray = field(init=False)
+    _anchor: np.ndarray | None = None
+    _segments: list = field(default_factory=list)
+    _budget: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        tool = np.asarray(self.tool, float)
+        waypoints = self.plan.waypoints
+        far = np.linalg.norm(waypoints[0] - tool) > self.settings.waypoint_tolerance
+        self._path = np.vstack([tool, waypoints]) if far else np.vstack([tool, waypoints[1:]])
+        self._move_start = tool
+        self._speed = min(self.plan.max_speed, self.limits.max_speed)
+        length = np.linalg.norm(np.diff(self._path, axis=0), axis=1).sum()
+        self._budget = 3.0 * length / self._speed + self.settings.time_margin
+        if reason := refusal(self.plan, tool, self.limits, self.settings):
+            self._finish(Outcome.ABORTED, f"refused: {reason}", tool)
+
+    @property
+    def done(self) -> bool:
+        return self._phase is _Phase.DONE
+
+    @property
+    def history(self) -> History:
+        """The evidence gathered so far, in execution order."""
+        if not self._segments:
+            return History()
+        a, b, s = zip(*self._segments, strict=True)
+        return History(np.array(a), np.array(b), np.array(s))
+
+    def abort(self, reason: str, tool: np.ndarray) -> np.ndarray:
+        self._finish(Outcome.ABORTED, reason, tool)
+        return np.zeros(2)
+
+    def step(self, t: float, tool: np.ndarray, force: np.ndarray, sensor_age: float) -> np.ndarray:
+        """Velocity command (2,) m/s for this control tick; zero once done."""
+        if self.done:
+            return np.zeros(2)
+        tool = np.asarray(tool, float)
+        magnitude = float(np.linalg.norm(force))
+        if sensor_age > self.limits.sensor_timeout:
+            return self.abort(f"sensor timeout: data {sensor_age:.2f} s old", tool)
+        if not self.limits.inside(tool):
+            return self.abort(f"tool left the workspace at {np.round(tool, 3).tolist()}", tool)
+        if magnitude > self.limits.max_force:
+            return self.abort(f"force {magnitude:.1f} N above the limit", tool)
+        if t - self.t_start > self._budget:
+            return self.abort(f"{self._phase.value} exceeded the {self._budget:.1f} s budget", tool)
+        velocity = {
+            _Phase.MOVE: self._step_move,
+            _Phase.LOAD_TEST: self._step_load_test,
+            _Phase.RETREAT: self._step_retreat,
+        }[self._phase](tool, magnitude)
+        speed = float(np.linalg.norm(velocity))
+        if speed > self._speed * (1 + 1e-9):
+            velocity *= self._speed / speed
+        return velocity
+
+    def check_next(self, tool: np.ndarray, velocity: np.ndarray, dt: float) -> np.ndarray:
+        """The command to send: ``velocity`` unless it would leave the box within ``dt``."""
+        if not self.done and not self.limits.inside(tool + velocity * dt):
+            return self.abort("the next command would leave the workspace box", tool)
+        self.max_speed_commanded = max(self.max_speed_commanded, float(np.linalg.norm(velocity)))
+        return velocity
+
+    # ------------------------------------------------------------------ phases
+
+    def _direction(self) -> np.ndarray:
+        d = self._path[self._move + 1] - self._path[self._move]
+        return d / max(np.linalg.norm(d), 1e-12)
+
+    def _loading(self) -> bool:
+        return self._move == len(self._path) - 2
+
+    def _step_move(self, tool: np.ndarray, force: float) -> np.ndarray:
+        d = self._direction()
+        if force > self.plan.force_threshold:
+            self._record_free(tool, d)
+            if self._loading():
+                self._anchor = tool.copy()
+                self._phase = _Phase.LOAD_TEST
+                return self._step_load_test(tool, force)
+            self._record_contact(tool, d, Status.COLLIDE)
+            return self._start_retreat(tool, f"collided on move {self._move + 1}")
+        target = self._path[self._move + 1]
+        remaining = float((target - tool) @ d)
+        if remaining <= self.settings.waypoint_tolerance:
+            if self._loading():
+                self._segments.append((self._move_start, tool.copy(), Status.FREE))
+                self._finish(Outcome.NO_CONTACT, "the loading move ended without contact", tool)
+                return np.zeros(2)
+            self._segments.append((self._move_start, tool.copy(), Status.FREE))
+            self._move += 1
+            self._move_start = tool.copy()
+            return self._step_move(tool, force)
+        to_target = target - tool
+        speed = min(self._speed, self.settings.approach_gain * remaining)
+        return to_target / max(np.linalg.norm(to_target), 1e-12) * speed
+
+    def _step_load_test(self, tool: np.ndarray, force: float) -> np.ndarray:
+        d = self._direction()
+        moved = tool - self._anchor
+        if np.linalg.norm(moved) > self.settings.slip_tolerance:
+            cross = d[0] * moved[1] - d[1] * moved[0]
+            status = Status.SLIP_LEFT if cross > 0 else Status.SLIP_RIGHT
+            self._record_contact(self._anchor, d, status)
+            return self._start_retreat(tool, f"slipped {status.name.lower()} under the load")
+        if force >= self.settings.load_force:
+            self._record_contact(self._anchor, d, Status.STICK)
+            self._finish(Outcome.DOCKED, f"stuck under {force:.1f} N", tool)
+            return np.zeros(2)
+        return d * min(self.settings.load_speed, self._speed)
+
+    def _start_retreat(self, tool: np.ndarray, why: str) -> np.ndarray:
+        self._phase = _Phase.RETREAT
+        self._anchor = tool.copy()
+        self.detail = why
+        return self._step_retreat(tool, 0.0)
+
+    def _step_retreat(self, tool: np.ndarray, force: float) -> np.ndarray:
+        d = self._direction()
+        if (self._anchor - tool) @ d >= self.settings.retreat_distance:
+            self._finish(Outcome.CONTACT_FAILED, self.detail, tool)
+            return np.zeros(2)
+        return -d * self._speed
+
+    # ------------------------------------------------------------------ evidence
+
+    def _record_free(self, contact: np.ndarray, d: np.ndarray) -> None:
+        end = contact - self.settings.contact_resolution * d
+        if (end - self._move_start) @ d > 0:
+            self._segments.append((self._move_start, end, Status.FREE))
+
+    def _record_contact(self, contact: np.ndarray, d: np.ndarray, status: Status) -> None:
+        half = 0.5 * self.settings.contact_resolution * d
+        self._segments.append((contact - half, contact + half, status))
+
+    def _finish(self, outcome: Outcome, detail: str, tool: np.ndarray) -> None:
+        self.outcome, self.detail = outcome, detail
+        self.stop_point = np.asarray(tool, float).copy()
+        self._phase = _Phase.DONE
+
+
+class ForceFilter:
+    """F/T bias removal and first-order low-pass filtering of the plane force (newtons).
+
+    The bias is the mean of the first ``bias_samples`` readings after :meth:`reset` (the
+    executor resets at the start of every plan, with the tool at rest in free space). After
+    that each reading updates ``value`` by an exponential filter with the given cutoff:
+    alpha = 1 - exp(-2 pi f_c dt), dt from the reading times.
+    """
+
+    def __init__(self, cutoff_hz: float, bias_samples: int) -> None:
+        if cutoff_hz <= 0 or bias_samples < 1:
+            raise ValueError("cutoff_hz must be > 0 and bias_samples >= 1")
+        self.cutoff_hz, self.bias_samples = cutoff_hz, bias_samples
+        self.reset()
+
+    def reset(self) -> None:
+        self._bias_sum, self._count = np.zeros(2), 0
+        self.bias = None
+        self.value = np.zeros(2)
+        self._last_t = None
+
+    @property
+    def ready(self) -> bool:
+        return self.bias is not None
+
+    def add(self, t: float, force: np.ndarray) -> None:
+        force = np.asarray(force, float)
+        if not self.ready:
+            self._bias_sum += force
+            self._count += 1
+            if self._count == self.bias_samples:
+                self.bias = self._bias_sum / self._count
+            self._last_t = t
+            return
+        dt = max(t - self._last_t, 0.0)
+        alpha = 1.0 - np.exp(-2.0 * np.pi * self.cutoff_hz * dt)
+        self.value = self.value + alpha * (force - self.bias - self.value)
+        self._last_t = t

@@ -1,0 +1,117 @@
+"""mock_hardware: simulated arm + F/T sensor on a ground-truth terrain (design.md).
+
+Integrates ``cmd_twist`` (TwistStamped, base frame; a command older than ``command_timeout``
+counts as zero) for a point tool against the terrain with ``nodes.mock_physics`` at ``rate_hz``
+and publishes ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped, environment force on
+the tool plus a constant bias and Gaussian noise). The terrain is drawn from a benchmark problem
+with a seed, or read from a YAML file (``vertices: [[x, y], ...]``, ``start: [x, y]``, optional
+``closed``, ``friction``). ``~/ground_truth`` (ShapeDistribution with no basis, latched) shows
+the truth for RViz, plots and tests; the planner never subscribes to it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.node import Node
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.msg import ShapeDistribution
+from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes.common import PLANE_TABLE, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.mock_physics import PointToolSim
+from tactile_dock_ros.nodes.params import Param, declare
+
+PARAMS = [
+    *PLANE_TABLE,
+    Param(
+        "problem",
+        "sloper",
+        "benchmark problem the terrain is drawn from",
+        choices=tuple(problems.names()),
+    ),
+    Param("seed", 0, "seed of the ground-truth draw", "", 0, 2**31 - 1),
+    Param("terrain_file", "", "YAML terrain file; overrides problem and seed when set"),
+    Param("rate_hz", 200.0, "simulation and sensor publication rate", "Hz", 1.0, 2000.0),
+    Param("stiffness", 500.0, "arm/tool contact stiffness", "N/m", 1.0, 1e6),
+    Param("command_timeout", 0.2, "a command older than this counts as zero", "s", 0.001, 5.0),
+    Param("pose_noise", 0.0001, "tool position noise (std per axis)", "m", 0.0, 0.01),
+    Param("force_noise", 0.05, "force noise (std per axis)", "N", 0.0, 10.0),
+    Param("force_bias", [0.3, -0.2, 0.5], "constant F/T bias in the base frame", "N", length=3),
+    Param("noise_seed", 1, "seed of the sensor noise", "", 0, 2**31 - 1),
+]
+
+
+def load_terrain(problem: str, seed: int, terrain_file: str):
+    """(vertices (n, 2), closed, friction, start (2,)) from a file or a problem + seed."""
+    if terrain_file:
+        data = yaml.safe_load(Path(terrain_file).read_text())
+        vertices = np.asarray(data["vertices"], float)
+        start = np.asarray(data["start"], float)
+        return vertices, bool(data.get("closed", False)), float(data.get("friction", 0.5)), start
+    spec = problems.get(problem)
+    truth = spec.sample_ground_truth(np.random.default_rng(seed))
+    return truth, spec.prior.closed, spec.friction, spec.start
+
+
+class MockHardwareNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("mock_hardware", **kwargs)
+        self.p = declare(self, PARAMS)
+        self.plane = plane_frame(self.p)
+        vertices, closed, friction, start = load_terrain(
+            self.p.problem, self.p.seed, self.p.terrain_file
+        )
+        self.sim = PointToolSim(vertices, closed, friction, self.p.stiffness, start)
+        self.rng = np.random.default_rng(self.p.noise_seed)
+        self.dt = 1.0 / self.p.rate_hz
+        self.velocity = np.zeros(2)
+        self.command_time = None
+        self.pose_pub = self.create_publisher(PoseStamped, "tool_pose", qos.SENSOR)
+        self.wrench_pub = self.create_publisher(WrenchStamped, "wrench", qos.SENSOR)
+        truth_pub = self.create_publisher(ShapeDistribution, "~/ground_truth", qos.LATCHED)
+        truth = GaussianShape(vertices.ravel(), np.zeros((vertices.size, 0)), closed, friction)
+        truth_pub.publish(convert.shape_to_msg(truth, header(self, self.p.plane_frame_id)))
+        self.create_subscription(
+            TwistStamped, "cmd_twist", guarded(self, "command", self.on_command), qos.COMMAND
+        )
+        self.create_timer(self.dt, self.on_tick)
+        self.get_logger().info(
+            f"terrain: {len(vertices)} vertices, friction {friction}, tool starts at {start}"
+        )
+
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def on_command(self, msg: TwistStamped) -> None:
+        self.velocity = convert.twist_velocity(msg, self.plane)
+        self.command_time = self.now()
+
+    def on_tick(self) -> None:
+        fresh = self.command_time is not None
+        fresh = fresh and self.now() - self.command_time <= self.p.command_timeout
+        self.sim.step(self.velocity if fresh else np.zeros(2), self.dt)
+        stamp = header(self, self.p.base_frame_id)
+        position = self.plane.point_from_plane(self.sim.tool) + self.rng.normal(
+            0.0, self.p.pose_noise, 3
+        )
+        pose = PoseStamped(header=stamp)
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, position)
+        pose.pose.orientation.w = 1.0
+        force = (
+            self.plane.vector_from_plane(self.sim.force)
+            + np.asarray(self.p.force_bias)
+            + self.rng.normal(0.0, self.p.force_noise, 3)
+        )
+        wrench = WrenchStamped(header=stamp)
+        wrench.wrench.force = convert.vector3(force)
+        self.pose_pub.publish(pose)
+        self.wrench_pub.publish(wrench)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(MockHardwareNode, args)

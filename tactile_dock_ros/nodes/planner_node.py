@@ -1,0 +1,246 @@
+"""planner: docking plans from posterior samples (paper Sec. V-B), and the episode loop.
+
+An episode starts with the ``start_episode`` service (std_srvs/Trigger): the node publishes a
+new id on ``episode`` (latched), which empties inference's history. Each cycle it waits for
+``shape_samples`` conditioned on the whole current ``contact_history`` (stamped after the
+episode start) and the tool position (``tool_pose``), calls ``core.planner.plan`` and publishes
+a ``plan`` (DockingPlan). The executor's ``execution_report`` ends the cycle. The episode ends
+DOCKED (a report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without
+docking) or ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/
+DiagnosticStatus, latched) carries the state and the per-cycle latencies.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from rclpy.time import Time
+from std_msgs.msg import UInt32
+from std_srvs.srv import Trigger
+
+from tactile_dock_ros.core.planner import plan as plan_docking
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    DockingPlan,
+    ExecutionReport,
+    ShapeDistribution,
+    ShapeSamples,
+)
+from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes.common import PLANE_TABLE, Stopwatch, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.params import Param, declare
+
+PARAMS = [
+    *PLANE_TABLE,
+    Param("load_direction", [0.0, -1.0], "unit load direction f_load in the plane", "", length=2),
+    Param("give_up_threshold", 1e-3, "give up below this docking probability", "", 0.0, 1.0),
+    Param("contact_resolution", 0.01, "exploration-bonus width w of eq. (24)", "m", 1e-4, 0.1),
+    Param("contact_force_threshold", 3.0, "guarded-move stop force", "N", 0.01, 500.0),
+    Param("max_speed", 0.1, "tool speed along the path", "m/s", 1e-4, 1.0),
+    Param("compliant", False, "plan with the compliant motion model"),
+    Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
+]
+
+RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
+
+
+class PlannerNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("planner", **kwargs)
+        self.p = declare(self, PARAMS)
+        load = np.asarray(self.p.load_direction, float)
+        if abs(np.linalg.norm(load) - 1.0) > convert.UNIT_TOLERANCE:
+            raise ValueError(f"parameter load_direction must be a unit vector, got {load}")
+        self.load = load
+        self.plane = plane_frame(self.p)
+        self.prior = None
+        self.tool = None
+        self.history = None
+        self.samples = None  # (msg, vertices) of the newest samples
+        self.episode = 0
+        self.state = IDLE
+        self.awaiting_plan = None  # plan_id being executed
+        self.cycles: list[dict] = []
+        self.targets: list[np.ndarray] = []
+        self.episode_start = None
+        self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
+        self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
+        self.status_pub = self.create_publisher(DiagnosticStatus, "episode_status", qos.LATCHED)
+        subscriptions = [
+            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED),
+            (ContactHistory, "contact_history", self.on_history, qos.LATCHED),
+            (ShapeSamples, "shape_samples", self.on_samples, qos.LATCHED),
+            (ExecutionReport, "execution_report", self.on_report, qos.EVENTS),
+            (PoseStamped, "tool_pose", self.on_pose, qos.SENSOR),
+        ]
+        for msg_type, topic, callback, profile in subscriptions:
+            self.create_subscription(msg_type, topic, guarded(self, topic, callback), profile)
+        self.create_service(Trigger, "start_episode", self.on_start)
+        self.publish_status()
+
+    # ------------------------------------------------------------------ inputs
+
+    def on_prior(self, msg: ShapeDistribution) -> None:
+        self.prior = convert.shape_from_msg(msg)
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        self.tool = convert.pose_position(msg, self.plane)
+        self.maybe_plan()
+
+    def on_history(self, msg: ContactHistory) -> None:
+        self.history = convert.history_from_segments(msg.segments)
+        self.maybe_plan()
+
+    def on_samples(self, msg: ShapeSamples) -> None:
+        self.samples = (msg, convert.samples_from_msg(msg))
+        self.maybe_plan()
+
+    def on_start(self, request, response):
+        if self.state == RUNNING:
+            response.success, response.message = False, f"episode {self.episode} is running"
+            return response
+        self.episode += 1
+        self.state, self.cycles, self.targets = RUNNING, [], []
+        self.awaiting_plan = None
+        self.episode_start = self.get_clock().now()
+        self.episode_pub.publish(UInt32(data=self.episode))
+        self.get_logger().info(f"episode {self.episode}: started")
+        self.publish_status()
+        response.success, response.message = True, f"episode {self.episode} started"
+        return response
+
+    def on_report(self, msg: ExecutionReport) -> None:
+        report = convert.report_from_msg(msg)
+        if self.state != RUNNING or report.plan_id != self.awaiting_plan:
+            return
+        cycle = self.cycles[-1]
+        cycle["outcome"] = report.outcome_name
+        cycle["execution_s"] = _seconds(msg.header.stamp) - cycle["plan_stamp"]
+        self.awaiting_plan = None
+        self.get_logger().info(
+            f"episode {self.episode} cycle {len(self.cycles)}: P_dock={cycle['p_dock']:.3f} "
+            f"decision=DOCK outcome={report.outcome_name} ({report.detail})"
+        )
+        if report.outcome == ExecutionReport.DOCKED:
+            self.finish(DOCKED, report.detail)
+        elif report.outcome == ExecutionReport.ABORTED:
+            self.finish(ABORTED, report.detail)
+        elif len(self.cycles) >= self.p.max_cycles:
+            self.finish(GAVE_UP, f"cycle budget of {self.p.max_cycles} spent")
+        else:
+            self.publish_status()
+            self.maybe_plan()
+
+    # ------------------------------------------------------------------ planning
+
+    def ready(self) -> bool:
+        if self.state != RUNNING or self.awaiting_plan is not None or self.samples is None:
+            return False
+        msg, _ = self.samples
+        fresh = Time.from_msg(msg.header.stamp) >= self.episode_start
+        planned = sum(len(c["history"]) for c in self.cycles[-1:])
+        return (
+            fresh
+            and self.prior is not None
+            and self.tool is not None
+            and self.history is not None
+            and msg.history_length == len(self.history)
+            and (not self.cycles or msg.history_length > planned)
+        )
+
+    def maybe_plan(self) -> None:
+        if not self.ready():
+            return
+        msg, vertices = self.samples
+        with Stopwatch() as watch:
+            try:
+                result = self.plan(vertices)
+            except (ValueError, RuntimeError) as err:
+                self.get_logger().error(f"planning failed: {err}")
+                self.finish(ABORTED, f"planner failed: {err}")
+                return
+        dock = result.decision == "dock"
+        command = convert.PlanCommand(
+            plan_id=len(self.cycles) + 1,
+            dock=dock,
+            waypoints=np.asarray(result.path, float).reshape(-1, 2),
+            load=self.load,
+            force_threshold=self.p.contact_force_threshold,
+            max_speed=self.p.max_speed,
+            compliant=self.p.compliant,
+            p_dock=result.p_dock,
+            objective=result.objective,
+            target_edge=result.target_edge if dock else -1,
+            reason=result.reason,
+        )
+        out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
+        self.cycles.append(
+            {
+                "history": self.history,
+                "p_dock": float(result.p_dock),
+                "inference_s": float(msg.compute_time),
+                "planning_s": watch.seconds,
+                "plan_stamp": _seconds(out.header.stamp),
+                "outcome": "",
+            }
+        )
+        self.plan_pub.publish(out)
+        if not dock:
+            self.get_logger().info(
+                f"episode {self.episode} cycle {len(self.cycles)}: P_dock={result.p_dock:.3g} "
+                f"decision=GIVE_UP outcome=- ({result.reason})"
+            )
+            self.finish(GAVE_UP, result.reason)
+            return
+        self.awaiting_plan = command.plan_id
+        self.targets.append(command.waypoints[-1])
+        self.publish_status()
+
+    def plan(self, vertices: np.ndarray):
+        return plan_docking(
+            vertices,
+            self.prior,
+            self.history,
+            self.tool,
+            self.load,
+            self.prior.friction,
+            self.p.contact_resolution,
+            np.array(self.targets).reshape(-1, 2),
+            give_up_threshold=self.p.give_up_threshold,
+        )
+
+    # ------------------------------------------------------------------ episode status
+
+    def finish(self, state: str, why: str) -> None:
+        self.state = state
+        self.get_logger().info(f"episode {self.episode}: {state} after {len(self.cycles)} cycles")
+        self.publish_status(why)
+
+    def publish_status(self, message: str = "") -> None:
+        values = {"episode": self.episode, "cycles": len(self.cycles)}
+        for i, cycle in enumerate(self.cycles, start=1):
+            for key in ("p_dock", "inference_s", "planning_s", "execution_s", "outcome"):
+                if key in cycle:
+                    values[f"cycle{i}.{key}"] = cycle[key]
+        level = (
+            DiagnosticStatus.OK if self.state in (RUNNING, DOCKED, IDLE) else DiagnosticStatus.WARN
+        )
+        self.status_pub.publish(
+            DiagnosticStatus(
+                level=level,
+                name=f"{self.get_name()}: episode",
+                message=f"{self.state}: {message}" if message else self.state,
+                hardware_id="tactile_dock",
+                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+            )
+        )
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(PlannerNode, args)
