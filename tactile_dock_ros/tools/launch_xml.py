@@ -17,6 +17,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import yaml
+
 _SUBSTITUTION = re.compile(r"\$\(([a-z-]+)\s+([^)]*)\)")
 
 
@@ -31,26 +33,47 @@ class NodeLaunch:
     parameters: list = field(default_factory=list)  # Path (params file) or (name, value str)
     remappings: list[tuple[str, str]] = field(default_factory=list)
 
-    def command(self, scripts_dir: Path, python: str = sys.executable) -> list[str]:
-        """argv that runs this node from the package's ``scripts/`` directory."""
-        argv = [
-            python,
-            str(scripts_dir / self.executable),
-            "--ros-args",
-            "-r",
-            f"__node:={self.name}",
-        ]
+    @property
+    def full_name(self) -> str:
+        return "/".join(["", *filter(None, self.namespace.strip("/").split("/")), self.name])
+
+    def command(
+        self, scripts_dir: Path, params_dir: Path, python: str = sys.executable
+    ) -> list[str]:
+        """argv that runs this node from the package's ``scripts/`` directory.
+
+        As ``ros2 launch`` does, each run of ``<param name value>`` entries is written to a
+        parameter file keyed by the node's full name in ``params_dir`` (values parsed as YAML),
+        so it overrides the node's section of an earlier file (a bare ``-p`` would not: rcl
+        prefers node-specific entries to wildcard ones).
+        """
+        argv = [python, str(scripts_dir / self.executable), "--ros-args"]
+        argv += ["-r", f"__node:={self.name}"]
         if self.namespace:
             argv += ["-r", f"__ns:={self.namespace}"]
-        for item in self.parameters:
-            if isinstance(item, Path):
-                argv += ["--params-file", str(item)]
-            else:
-                name, value = item
-                argv += ["-p", f"{name}:={value if value != '' else chr(39) * 2}"]
+        for index, group in enumerate(self._parameter_groups()):
+            if isinstance(group, Path):
+                argv += ["--params-file", str(group)]
+                continue
+            values = {k: yaml.safe_load(v) if v != "" else "" for k, v in group}
+            path = Path(params_dir) / f"{self.full_name.strip('/').replace('/', '__')}_{index}.yaml"
+            path.write_text(yaml.safe_dump({self.full_name: {"ros__parameters": values}}))
+            argv += ["--params-file", str(path)]
         for source, target in self.remappings:
             argv += ["-r", f"{source}:={target}"]
         return argv
+
+    def _parameter_groups(self) -> list:
+        """Files as they are, consecutive name/value pairs grouped into lists."""
+        groups: list = []
+        for item in self.parameters:
+            if isinstance(item, Path):
+                groups.append(item)
+            elif groups and isinstance(groups[-1], list):
+                groups[-1].append(item)
+            else:
+                groups.append([item])
+        return groups
 
     def parameter_files(self) -> list[Path]:
         return [p for p in self.parameters if isinstance(p, Path)]

@@ -1,0 +1,52 @@
+"""Build a node of the suite in-process, in its own rclpy context, from launch-file settings."""
+
+import contextlib
+import importlib
+import inspect
+from collections.abc import Iterator
+
+import rclpy
+from conftest import REPO_ROOT
+from rclpy.context import Context
+from rclpy.node import Node
+
+from tactile_dock_ros.tools import launch_xml
+
+LAUNCH_FILE = REPO_ROOT / "launch" / "tactile_dock.launch.xml"
+SHARE = {"tactile_dock_ros": REPO_ROOT}
+
+
+def launch_nodes(profile: str, **arguments: str) -> dict:
+    """Node name -> NodeLaunch declared by the launch file for ``profile``."""
+    nodes = launch_xml.parse(LAUNCH_FILE, SHARE, {"profile": profile, **arguments})
+    return {n.name: n for n in nodes}
+
+
+def node_class(executable: str) -> type[Node]:
+    """The one Node subclass defined by ``tactile_dock_ros.nodes.<executable>``."""
+    module = importlib.import_module(f"tactile_dock_ros.nodes.{executable}")
+    (cls,) = [
+        c
+        for _, c in inspect.getmembers(module, inspect.isclass)
+        if issubclass(c, Node) and c.__module__ == module.__name__
+    ]
+    return cls
+
+
+@contextlib.contextmanager
+def node_from_launch(
+    spec, params_dir, extra_args: list[str] = ()
+) -> Iterator[tuple[Node, Context]]:
+    """Instantiate the node ``spec`` with its launch parameters and remappings (argv form)."""
+    argv = spec.command(REPO_ROOT / "scripts", params_dir)
+    cli_args = argv[argv.index("--ros-args") :] + list(extra_args)
+    context = Context()
+    rclpy.init(context=context)
+    node = None
+    try:
+        node = node_class(spec.executable)(context=context, cli_args=cli_args)
+        yield node, context
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.shutdown(context=context)

@@ -1,0 +1,199 @@
+"""Message <-> numpy/core conversion: exact round trips and clear errors on malformed input."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from std_msgs.msg import Header
+
+from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
+from tactile_dock_ros.nodes import convert
+from tactile_dock_ros.nodes.convert import MessageError
+
+HEADER = Header(frame_id="dock_plane")
+
+
+def _shape(rng, n=5, m=3, closed=False):
+    return GaussianShape(rng.normal(size=2 * n), rng.normal(size=(2 * n, m)), closed, 0.7)
+
+
+def _history():
+    return History(
+        [[0.0, 1.0], [0.0, 0.1], [0.2, 0.3]],
+        [[0.0, 0.1], [0.0, 0.09], [0.2, 0.25]],
+        [Status.FREE, Status.STICK, Status.SLIP_RIGHT],
+    )
+
+
+def _plan(**changes):
+    fields = dict(
+        plan_id=3,
+        dock=True,
+        waypoints=np.array([[0.0, 0.5], [0.1, 0.2], [0.1, -0.1]]),
+        load=np.array([0.0, -1.0]),
+        force_threshold=3.0,
+        max_speed=0.1,
+        compliant=False,
+        p_dock=0.4,
+        objective=0.3,
+        target_edge=4,
+        reason="best site",
+    )
+    fields.update(changes)
+    return convert.PlanCommand(**fields)
+
+
+def test_shape_round_trip_is_exact():
+    shape = _shape(np.random.default_rng(0), closed=True)
+    back = convert.shape_from_msg(convert.shape_to_msg(shape, HEADER))
+    np.testing.assert_array_equal(back.mean, shape.mean)
+    np.testing.assert_array_equal(back.basis, shape.basis)
+    assert back.closed and back.friction == shape.friction
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("mean", [0.0] * 9, "mean has 9 values"),
+        ("basis", [0.0] * 5, "basis has 5 values"),
+        ("num_vertices", 1, "num_vertices"),
+        ("mean", [np.nan] + [0.0] * 9, "NaN"),
+        ("basis", [np.inf] + [0.0] * 29, "NaN or inf"),
+        ("friction", -0.1, "friction"),
+    ],
+)
+def test_malformed_shape_is_rejected(field, value, match):
+    msg = convert.shape_to_msg(_shape(np.random.default_rng(1)), HEADER)
+    setattr(msg, field, value)
+    with pytest.raises(MessageError, match=match):
+        convert.shape_from_msg(msg)
+
+
+def test_history_round_trip_keeps_order_status_and_plan_ids():
+    history = _history()
+    msg = convert.history_to_msg(history, HEADER, plan_ids=[1, 1, 2])
+    assert [s.plan_id for s in msg.segments] == [1, 1, 2]
+    back = convert.history_from_segments(msg.segments)
+    np.testing.assert_array_equal(back.a, history.a)
+    np.testing.assert_array_equal(back.b, history.b)
+    np.testing.assert_array_equal(back.status, history.status)
+
+
+def test_empty_history_converts_both_ways():
+    assert len(convert.history_from_segments([])) == 0
+    assert convert.history_to_msg(History(), HEADER).segments == []
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda s: setattr(s, "status", 9), "unknown contact status"),
+        (lambda s: setattr(s.end, "x", float("nan")), "NaN"),
+        (lambda s: setattr(s, "end", s.start), "zero length"),
+    ],
+)
+def test_malformed_segment_is_rejected(change, match):
+    segments = convert.history_to_msg(_history(), HEADER).segments
+    change(segments[1])
+    with pytest.raises(MessageError, match=match):
+        convert.history_from_segments(segments)
+
+
+def test_samples_round_trip_and_size_checks():
+    vertices = np.random.default_rng(2).normal(size=(4, 6, 2))
+    msg = convert.samples_to_msg(vertices, HEADER, "hmc", 3.5, 7, [2], 0.25)
+    np.testing.assert_array_equal(convert.samples_from_msg(msg), vertices)
+    assert (msg.history_length, list(msg.dropped_segments)) == (7, [2])
+    msg.num_samples = 5
+    with pytest.raises(MessageError, match="expected num_samples"):
+        convert.samples_from_msg(msg)
+    msg.num_samples, msg.samples = 0, []
+    with pytest.raises(MessageError, match="num_samples >= 1"):
+        convert.samples_from_msg(msg)
+
+
+def test_plan_round_trip():
+    plan = _plan()
+    back = convert.plan_from_msg(convert.plan_to_msg(plan, HEADER))
+    np.testing.assert_array_equal(back.waypoints, plan.waypoints)
+    assert (back.plan_id, back.dock, back.target_edge, back.reason) == (3, True, 4, "best site")
+    assert back.force_threshold == 3.0 and back.max_speed == 0.1
+
+
+@pytest.mark.parametrize(
+    ("plan", "match"),
+    [
+        (_plan(waypoints=np.zeros((1, 2))), ">= 2 waypoints"),
+        (_plan(waypoints=np.array([[0.0, 0.5], [0.1, 0.2], [0.1, 0.2]])), "zero length"),
+        (_plan(load=np.array([0.0, -2.0])), "unit vector"),
+        (_plan(max_speed=0.0), "must be > 0"),
+        (_plan(waypoints=np.array([[0.0, np.nan], [0.1, 0.2]])), "NaN"),
+    ],
+)
+def test_malformed_dock_plan_is_rejected(plan, match):
+    with pytest.raises(MessageError, match=match):
+        convert.plan_from_msg(convert.plan_to_msg(plan, HEADER))
+
+
+def test_give_up_plan_needs_no_waypoints_but_decision_must_be_known():
+    msg = convert.plan_to_msg(_plan(dock=False, waypoints=np.zeros((0, 2))), HEADER)
+    assert msg.decision == DockingPlan.GIVE_UP
+    assert not convert.plan_from_msg(msg).dock
+    msg.decision = 7
+    with pytest.raises(MessageError, match="unknown decision"):
+        convert.plan_from_msg(msg)
+
+
+def test_report_round_trip_and_unknown_outcome():
+    report = convert.Report(
+        5, ExecutionReport.CONTACT_FAILED, _history(), np.array([0.1, 0.2]), "x"
+    )
+    msg = convert.report_to_msg(report, HEADER)
+    assert all(s.plan_id == 5 for s in msg.segments)
+    back = convert.report_from_msg(msg)
+    assert back.outcome_name == "CONTACT_FAILED" and back.detail == "x"
+    np.testing.assert_array_equal(back.history.status, report.history.status)
+    msg.outcome = 42
+    with pytest.raises(MessageError, match="unknown outcome"):
+        convert.report_from_msg(msg)
+
+
+def test_status_constants_match_the_core():
+    assert [ContactSegment.FREE, ContactSegment.STICK, ContactSegment.SLIP_RIGHT] == [
+        Status.FREE,
+        Status.STICK,
+        Status.SLIP_RIGHT,
+    ]
+
+
+def _vertical_plane():
+    return convert.PlaneFrame(np.array([0.1, 0.6, -0.2]), np.eye(3)[0], np.eye(3)[2])
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-10, 10), min_size=2, max_size=2))
+def test_plane_points_round_trip(xy):
+    plane = _vertical_plane()
+    p2 = np.array(xy)
+    np.testing.assert_allclose(plane.point_to_plane(plane.point_from_plane(p2)), p2, atol=1e-12)
+    np.testing.assert_allclose(plane.vector_to_plane(plane.vector_from_plane(p2)), p2, atol=1e-12)
+
+
+def test_plane_axes_must_be_orthonormal():
+    with pytest.raises(ValueError, match="orthonormal"):
+        convert.PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))
+
+
+def test_pose_and_wrench_map_into_the_plane():
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+
+    plane = _vertical_plane()
+    pose = PoseStamped()
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = 0.3, 5.0, 0.4
+    np.testing.assert_allclose(convert.pose_position(pose, plane), [0.2, 0.6])
+    wrench = WrenchStamped()
+    wrench.wrench.force.z = float("inf")
+    with pytest.raises(MessageError, match="wrench.force"):
+        convert.wrench_force(wrench, plane)

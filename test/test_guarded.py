@@ -1,0 +1,165 @@
+"""Guarded-move executor logic in closed loop with the mock physics (no DDS)."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_dock_ros.core.history import Status
+from tactile_dock_ros.nodes.convert import PlanCommand
+from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
+from tactile_dock_ros.nodes.mock_physics import PointToolSim
+
+FLOOR = np.array([[1.0, 0.0], [-1.0, 0.0]])  # y = 0, solid below (right to left)
+SLOPE_DOWN_RIGHT = np.array([[1.0, -1.0], [-1.0, 1.0]])  # 45 degrees, too steep for mu = 0.5
+SLOPE_DOWN_LEFT = np.array([[1.0, 1.0], [-1.0, -1.0]])
+LIMITS = Limits(np.array([-0.9, -0.9]), np.array([0.9, 0.9]), 0.2, 40.0, 0.5)
+DT = 0.01
+
+
+def _plan(waypoints, speed=0.1, threshold=3.0):
+    return PlanCommand(
+        1, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed, False,
+        0.5, 0.5, 0, "",
+    )  # fmt: skip
+
+
+def _execute(terrain, waypoints, limits=LIMITS, settings=Settings(), speed=0.1, start=None):
+    sim = PointToolSim(terrain, False, 0.5, 500.0, waypoints[0] if start is None else start)
+    run = GuardedRun(_plan(waypoints, speed), sim.tool, limits, settings, 0.0)
+    t, commanded = 0.0, []
+    for _ in range(10_000):
+        if run.done:
+            break
+        velocity = run.check_next(sim.tool, run.step(t, sim.tool, sim.force, 0.0), DT)
+        commanded.append(velocity)
+        sim.step(velocity, DT)
+        t += DT
+    assert run.done
+    return run, sim, np.array(commanded)
+
+
+def test_docks_on_a_flat_floor_and_reports_free_then_stick():
+    run, sim, _ = _execute(FLOOR, [[0.0, 0.3], [0.0, -0.1]])
+    assert run.outcome is Outcome.DOCKED
+    assert list(run.history.status) == [Status.FREE, Status.STICK]
+    free_end, (a, b) = run.history.b[0], (run.history.a[1], run.history.b[1])
+    assert free_end[1] > 0.0  # the free segment stops short of the surface
+    assert a[1] > 0.0 > b[1]  # the contact segment crosses it
+    assert np.linalg.norm(b - a) == pytest.approx(Settings().contact_resolution)
+    assert abs(run.stop_point[1]) < 1e-6 and np.linalg.norm(sim.force) >= Settings().load_force
+
+
+@pytest.mark.parametrize(
+    ("terrain", "status", "side"),
+    [(SLOPE_DOWN_RIGHT, Status.SLIP_LEFT, 1.0), (SLOPE_DOWN_LEFT, Status.SLIP_RIGHT, -1.0)],
+)
+def test_steep_slope_slips_to_the_correct_side_and_retreats(terrain, status, side):
+    run, sim, _ = _execute(terrain, [[0.0, 0.3], [0.0, -0.1]])
+    assert run.outcome is Outcome.CONTACT_FAILED
+    assert run.history.status[-1] == status
+    contact = 0.5 * (run.history.a[-1] + run.history.b[-1])
+    assert np.sign(contact[0]) in (0.0, side)  # slid downhill before or during the test
+    assert np.linalg.norm(sim.force) < 1e-9  # retreated into free space
+
+
+def test_contact_on_a_prefix_move_is_a_collision():
+    run, _, _ = _execute(FLOOR, [[0.3, 0.3], [0.3, -0.05], [0.0, -0.1]])
+    assert run.outcome is Outcome.CONTACT_FAILED
+    assert list(run.history.status) == [Status.FREE, Status.COLLIDE]
+    assert "move 1" in run.detail
+
+
+def test_loading_move_without_contact_reports_the_whole_path_free():
+    run, _, _ = _execute(FLOOR, [[0.0, 0.5], [0.2, 0.4], [0.2, 0.2]])
+    assert run.outcome is Outcome.NO_CONTACT
+    assert list(run.history.status) == [Status.FREE, Status.FREE]
+    np.testing.assert_allclose(run.stop_point, [0.2, 0.2], atol=Settings().waypoint_tolerance)
+
+
+def test_a_far_first_waypoint_is_reached_by_an_extra_move():
+    run, _, _ = _execute(FLOOR, [[0.0, 0.3], [0.0, -0.1]], start=[0.2, 0.5])
+    assert run.outcome is Outcome.DOCKED
+    assert list(run.history.status) == [Status.FREE, Status.FREE, Status.STICK]
+
+
+def test_commands_never_exceed_the_speed_limit():
+    limits = Limits(LIMITS.workspace_min, LIMITS.workspace_max, 0.05, 40.0, 0.5)
+    run, _, commanded = _execute(FLOOR, [[0.0, 0.3], [0.0, -0.1]], limits=limits, speed=0.05)
+    speeds = np.linalg.norm(commanded, axis=1)
+    assert speeds.max() <= 0.05 + 1e-12 and run.max_speed_commanded <= 0.05 + 1e-12
+
+
+@pytest.mark.parametrize(
+    ("waypoints", "speed", "limits", "match"),
+    [
+        ([[0.0, 0.3], [0.0, -0.1]], 0.5, LIMITS, "speed"),
+        ([[0.0, 0.3], [0.0, -0.95]], 0.1, LIMITS, "outside the workspace"),
+        (
+            [[0.0, 0.3], [0.0, -0.1]],
+            0.1,
+            Limits(LIMITS.workspace_min, LIMITS.workspace_max, 0.2, 5.0, 0.5),
+            "force limit",
+        ),
+    ],
+)
+def test_plans_outside_the_limits_are_refused_without_moving(waypoints, speed, limits, match):
+    run = GuardedRun(_plan(waypoints, speed), np.array([0.0, 0.3]), limits, Settings(), 0.0)
+    assert run.done and run.outcome is Outcome.ABORTED and match in run.detail
+    assert np.all(run.step(0.0, np.array([0.0, 0.3]), np.zeros(2), 0.0) == 0.0)
+
+
+def test_sensor_timeout_aborts_with_zero_command():
+    run = GuardedRun(_plan([[0.0, 0.3], [0.0, -0.1]]), np.array([0.0, 0.3]), LIMITS, Settings(), 0)
+    assert np.any(run.step(0.0, np.array([0.0, 0.3]), np.zeros(2), 0.0) != 0)
+    velocity = run.step(0.1, np.array([0.0, 0.29]), np.zeros(2), sensor_age=0.6)
+    assert np.all(velocity == 0) and run.outcome is Outcome.ABORTED
+    assert "sensor timeout" in run.detail
+
+
+def test_force_above_the_limit_and_leaving_the_box_abort():
+    start = np.array([0.0, 0.3])
+    run = GuardedRun(_plan([[0.0, 0.3], [0.0, -0.1]]), start, LIMITS, Settings(), 0.0)
+    assert np.all(run.step(0.0, start, np.array([0.0, 41.0]), 0.0) == 0)
+    assert run.outcome is Outcome.ABORTED and "force" in run.detail
+    run = GuardedRun(_plan([[0.0, 0.3], [0.0, -0.1]]), start, LIMITS, Settings(), 0.0)
+    assert np.all(run.check_next(np.array([0.0, 0.899]), np.array([0.0, 0.2]), DT) == 0)
+    assert run.outcome is Outcome.ABORTED and "workspace" in run.detail
+
+
+def test_force_filter_removes_the_bias_and_smooths_noise():
+    rng = np.random.default_rng(0)
+    bias = np.array([0.4, -0.3])
+    flt = ForceFilter(cutoff_hz=5.0, bias_samples=20)
+    for i in range(20):
+        assert not flt.ready
+        flt.add(i * 0.005, bias + rng.normal(0, 0.05, 2))
+    assert flt.ready and np.allclose(flt.bias, bias, atol=0.05)
+    for i in range(20, 400):
+        flt.add(i * 0.005, bias + np.array([0.0, 2.0]) + rng.normal(0, 0.5, 2))
+    np.testing.assert_allclose(flt.value, [0.0, 2.0], atol=0.3)
+
+
+def test_mock_tool_sticks_inside_and_slides_outside_the_friction_cone():
+    sim = PointToolSim(FLOOR, False, 0.5, 500.0, [0.0, 0.01])
+    for _ in range(40):  # push down and 20 degrees sideways: inside the cone (26.6 degrees)
+        sim.step(0.1 * np.array([np.sin(0.35), -np.cos(0.35)]), DT)
+    assert sim.tool[0] == pytest.approx(0.01 * np.tan(0.35), abs=1e-9)
+    x_stuck = sim.tool[0]
+    for _ in range(40):  # 45 degrees: outside, slides along +x
+        sim.step(0.1 * np.array([1.0, -1.0]) / np.sqrt(2), DT)
+    assert sim.tool[0] > x_stuck + 0.01 and sim.tool[1] == pytest.approx(0.0, abs=1e-12)
+    f = sim.force
+    assert abs(f[0]) == pytest.approx(0.5 * f[1], rel=1e-6)  # on the cone boundary
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)), min_size=1, max_size=60))
+def test_mock_tool_never_enters_the_solid(velocities):
+    notch = np.array([[0.5, -0.1], [0.1, 0.0], [0.05, -0.08], [-0.05, 0.02], [-0.5, 0.1]])
+    sim = PointToolSim(notch, False, 0.4, 500.0, [0.0, 0.3])
+    for v in velocities:
+        for _ in range(5):
+            sim.step(np.array(v), DT)
+            below = np.interp(sim.tool[0], notch[::-1, 0], notch[::-1, 1])
+            assert sim.tool[1] >= below - 1e-9
