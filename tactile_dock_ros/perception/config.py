@@ -1,4 +1,4 @@
-"""Perception configuration: camera extrinsic with covariance, depth-noise model, slicing, occlusion.
+"""Perception configuration: extrinsic with covariance, depth noise, slicing, occlusion.
 
 YAML / dict format (every key optional except ``extrinsic.T_plane_camera``)::
 

@@ -7,6 +7,8 @@ plane crosses the polyline, so occlusion is exact and a pixel costs one 2-D segm
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from .config import DepthNoise
@@ -54,7 +56,7 @@ def render_depth(
     dxy = rays[..., :2]
     depth = np.full((height, width), np.inf)
     # One vectorized pass per edge keeps memory at O(pixels) instead of O(pixels x edges).
-    for p, q in zip(verts[:-1], verts[1:], strict=True):
+    for p, q in itertools.pairwise(verts):
         e = q - p
         denom = cross2(dxy, e)
         w = p - origin[:2]

@@ -14,8 +14,9 @@ Steps (all numpy, one pass over the valid pixels):
    silhouette; missing returns are treated alike). Visible runs with fewer than
    ``_MIN_RUN_BINS`` bins are flying-pixel debris and are dropped into the neighbouring gap;
 6. resample each visible run at the vertex spacing and put evenly spaced placeholder vertices
-   (at least 3, chord / spacing - 1 when more) on the chord of each hidden stretch (the prior replaces them with the Brownian-bridge mean); the
-   spacing grows until the vertex count fits ``max_vertices``.
+   (at least 3, chord / spacing - 1 when more) on the chord of each hidden stretch (the prior
+   replaces them with the Brownian-bridge mean); the spacing grows until the vertex count
+   fits ``max_vertices``.
 For an extruded terrain, 3-D visibility from an off-plane camera equals 2-D visibility from its
 projection, so the bearing order is exact there; for a general scene it is the usual
 single-viewpoint approximation.
@@ -23,6 +24,7 @@ single-viewpoint approximation.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,7 +81,7 @@ def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_w
 
 
 def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: float):
-    """Per-bearing-bin median points, ordered by decreasing bearing: (k, 2) and bin counts (k,)."""
+    """Per-bearing-bin median points, ordered by decreasing bearing: (k, 2)."""
     rel = points - camera_xy
     ref = rel.mean(axis=0)
     ref = ref / max(np.linalg.norm(ref), 1e-12)
@@ -95,13 +97,13 @@ def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: fl
     mean_bearing = np.add.reduceat(bearing, starts) / counts
     c, s = np.cos(mean_bearing), np.sin(mean_bearing)
     dirs = np.stack([c * ref[0] - s * ref[1], s * ref[0] + c * ref[1]], axis=1)
-    return camera_xy + med_range[:, None] * dirs, counts
+    return camera_xy + med_range[:, None] * dirs
 
 
 def _layout(runs: list[np.ndarray], spacing: float, max_hidden: int):
     """Vertex counts of each visible run and of each hidden stretch between runs."""
     run_counts = [max(2, round(arc_length(r)[-1] / spacing) + 1) for r in runs]
-    chords = [np.linalg.norm(b[0] - a[-1]) for a, b in zip(runs[:-1], runs[1:], strict=True)]
+    chords = [np.linalg.norm(b[0] - a[-1]) for a, b in itertools.pairwise(runs)]
     low = min(_MIN_HIDDEN_VERTICES, max_hidden)
     hidden_counts = [int(np.clip(round(c / spacing) - 1, low, max_hidden)) for c in chords]
     return run_counts, hidden_counts
@@ -121,12 +123,10 @@ def extract_slice(
             f"only {len(pts)} depth points lie in the plane's band; need {params.min_points}"
         )
     camera_xy = extrinsic.camera_centre[:2].copy()
-    profile, counts = profile_from_points(pts, camera_xy, params.vertex_spacing_m)
+    profile = profile_from_points(pts, camera_xy, params.vertex_spacing_m)
     cut = np.flatnonzero(np.linalg.norm(np.diff(profile, axis=0), axis=1) > params.gap_m) + 1
     bounds = np.r_[0, cut, len(profile)]
-    runs = [
-        profile[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a >= _MIN_RUN_BINS
-    ]
+    runs = [profile[a:b] for a, b in itertools.pairwise(bounds) if b - a >= _MIN_RUN_BINS]
     if not runs or sum(len(r) for r in runs) < 2:
         raise PerceptionError("the slice has too few visible points to form a terrain profile")
     spacing = params.vertex_spacing_m
