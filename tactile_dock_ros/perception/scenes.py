@@ -33,8 +33,10 @@ def look_at_pose(camera: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 
 def default_camera(width: int = 640, height: int = 480, offset_z_m: float = 0.03):
-    """(K, T_plane_camera) of a 525-px-focal camera 0.7 m out, 0.1 m below the holds."""
-    K = np.array([[525.0, 0.0, (width - 1) / 2], [0.0, 525.0, (height - 1) / 2], [0, 0, 1]])
+    """(K, T_plane_camera): 525 px focal length at 640 px width (scaled with it), 0.7 m out from
+    the wall and 0.1 m below the holds, ``offset_z_m`` off the plane."""
+    f = 525.0 * width / 640
+    K = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0, 0, 1]])
     return K, look_at_pose(np.array([0.7, -0.1, offset_z_m]), np.array([0.0, 0.28]))
 
 
