@@ -15,6 +15,7 @@ SLOPE_DOWN_RIGHT = np.array([[1.0, -1.0], [-1.0, 1.0]])  # 45 degrees, too steep
 SLOPE_DOWN_LEFT = np.array([[1.0, 1.0], [-1.0, -1.0]])
 LIMITS = Limits(np.array([-0.9, -0.9]), np.array([0.9, 0.9]), 0.2, 40.0, 0.5)
 DT = 0.01
+SETTINGS = Settings()
 
 
 def _plan(waypoints, speed=0.1, threshold=3.0):
@@ -24,7 +25,7 @@ def _plan(waypoints, speed=0.1, threshold=3.0):
     )  # fmt: skip
 
 
-def _execute(terrain, waypoints, limits=LIMITS, settings=Settings(), speed=0.1, start=None):
+def _execute(terrain, waypoints, limits=LIMITS, settings=SETTINGS, speed=0.1, start=None):
     sim = PointToolSim(terrain, False, 0.5, 500.0, waypoints[0] if start is None else start)
     run = GuardedRun(_plan(waypoints, speed), sim.tool, limits, settings, 0.0)
     t, commanded = 0.0, []

@@ -1,7 +1,6 @@
 """The launch files: both profiles parse, executables exist, mock and robot sides agree."""
 
 import os
-
 from pathlib import Path
 
 import pytest

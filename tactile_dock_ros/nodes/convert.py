@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import Point, Vector3
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from tactile_dock_ros.core.history import History, Status
@@ -27,6 +28,8 @@ from tactile_dock_ros.msg import (
     ShapeDistribution,
     ShapeSamples,
 )
+from tactile_dock_ros.perception import depth as depth_codec
+from tactile_dock_ros.perception.config import PerceptionError
 
 # Tolerance (dimensionless) on |load_direction| = 1 and on plane axis orthonormality.
 UNIT_TOLERANCE = 1e-3
@@ -332,3 +335,45 @@ def report_from_msg(msg: ExecutionReport) -> Report:
 
 def status_name(status: int) -> str:
     return Status(status).name
+
+
+# --------------------------------------------------------------------------- depth camera
+
+
+def depth_from_image(msg: Image) -> np.ndarray:
+    """sensor_msgs/Image (16UC1 mm or 32FC1 m; step, byte order honoured) -> (h, w) metres,
+    NaN where there is no return (``perception.depth.decode_depth``)."""
+    try:
+        return depth_codec.decode_depth(
+            msg.data, msg.height, msg.width, msg.encoding, msg.is_bigendian, msg.step
+        )
+    except PerceptionError as err:
+        raise MessageError(f"depth image: {err}") from err
+
+
+def intrinsics_from_camera_info(info: CameraInfo, image: Image) -> np.ndarray:
+    """CameraInfo K (3, 3), checked against the image size; distortion is not used."""
+    try:
+        return depth_codec.check_intrinsics(
+            info.k, image.height, image.width, info.height, info.width
+        )
+    except PerceptionError as err:
+        raise MessageError(f"camera info: {err}") from err
+
+
+def depth_to_image(depth_m: np.ndarray, header: Header, encoding: str = "32FC1") -> Image:
+    data, step = depth_codec.encode_depth(depth_m, encoding)
+    height, width = np.shape(depth_m)
+    return Image(
+        header=header, height=height, width=width, encoding=encoding, is_bigendian=False,
+        step=step, data=data,
+    )  # fmt: skip
+
+
+def camera_info(K: np.ndarray, width: int, height: int, header: Header) -> CameraInfo:
+    return CameraInfo(
+        header=header, width=width, height=height, distortion_model="plumb_bob",
+        d=[0.0] * 5, k=np.asarray(K, float).ravel().tolist(),
+        r=np.eye(3).ravel().tolist(),
+        p=np.hstack([np.asarray(K, float), np.zeros((3, 1))]).ravel().tolist(),
+    )  # fmt: skip

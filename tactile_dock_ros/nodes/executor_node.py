@@ -67,6 +67,7 @@ class ExecutorNode(Node):
         self.tool: np.ndarray | None = None
         self.pose_time = self.wrench_time = None
         self.run: GuardedRun | None = None
+        self.pending = None  # (plan, time received) waiting for a tool pose
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
         self.create_subscription(
@@ -97,19 +98,28 @@ class ExecutorNode(Node):
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
-        if self.run is not None:
+        if self.run is not None or self.pending is not None:
             self.report(plan.plan_id, Outcome.ABORTED, "refused: another plan is running")
             return
-        if self.tool is None:
-            self.report(plan.plan_id, Outcome.ABORTED, "refused: no tool pose received yet")
-            return
-        self.filter.reset()
-        self.run = GuardedRun(plan, self.tool, self.limits, self.settings, self.now())
+        self.pending = (plan, self.now())
         self.get_logger().info(
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )
 
+    def start_pending(self) -> None:
+        """Start the received plan once the tool pose is known (waits up to sensor_timeout)."""
+        plan, received = self.pending
+        if self.tool is not None:
+            self.pending = None
+            self.filter.reset()
+            self.run = GuardedRun(plan, self.tool, self.limits, self.settings, self.now())
+        elif self.now() - received > self.limits.sensor_timeout:
+            self.pending = None
+            self.report(plan.plan_id, Outcome.ABORTED, "sensor timeout: no tool pose received")
+
     def on_tick(self) -> None:
+        if self.pending is not None:
+            self.start_pending()
         run = self.run
         if run is None:
             return

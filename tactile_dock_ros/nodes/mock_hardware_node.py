@@ -6,7 +6,11 @@ and publishes ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped, environ
 the tool plus a constant bias and Gaussian noise). The terrain is drawn from a benchmark problem
 with a seed, or read from a YAML file (``vertices: [[x, y], ...]``, ``start: [x, y]``, optional
 ``closed``, ``friction``). ``~/ground_truth`` (ShapeDistribution with no basis, latched) shows
-the truth for RViz, plots and tests; the planner never subscribes to it.
+the truth for RViz, plots and tests; the planner never subscribes to it. With
+``perception_config`` set, a depth camera at that file's extrinsic, displaced by
+``calibration_error`` (the deliberate miscalibration), renders the terrain with the file's depth
+noise and real occlusion (``perception.render``), published on ``depth/image`` and
+``depth/camera_info``.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy as np
 import yaml
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.shape import GaussianShape
@@ -25,6 +30,8 @@ from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import PLANE_TABLE, guarded, header, plane_frame, run
 from tactile_dock_ros.nodes.mock_physics import PointToolSim
 from tactile_dock_ros.nodes.params import Param, declare
+from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
+from tactile_dock_ros.perception.render import render_depth
 
 PARAMS = [
     *PLANE_TABLE,
@@ -43,6 +50,16 @@ PARAMS = [
     Param("force_noise", 0.05, "force noise (std per axis)", "N", 0.0, 10.0),
     Param("force_bias", [0.3, -0.2, 0.5], "constant F/T bias in the base frame", "N", length=3),
     Param("noise_seed", 1, "seed of the sensor noise", "", 0, 2**31 - 1),
+    Param("perception_config", "", "camera pose and depth noise (YAML); '' = no camera"),
+    Param(
+        "calibration_error",
+        [0.01, -0.01, 0.0, 0.0, 0.0, 0.017],
+        "true camera pose minus the configured one (tx ty tz m, rx ry rz rad)",
+        length=6,
+    ),
+    Param("camera_rate_hz", 2.0, "depth image publication rate", "Hz", 0.1, 60.0),
+    Param("image_size", [320, 240], "depth image width, height", "px", 8, 4096, length=2),
+    Param("focal_px", 262.5, "focal length of the mock depth camera", "px", 1.0, 1e5),
 ]
 
 
@@ -80,9 +97,39 @@ class MockHardwareNode(Node):
             TwistStamped, "cmd_twist", guarded(self, "command", self.on_command), qos.COMMAND
         )
         self.create_timer(self.dt, self.on_tick)
+        if self.p.perception_config:
+            self.start_camera(vertices)
         self.get_logger().info(
             f"terrain: {len(vertices)} vertices, friction {friction}, tool starts at {start}"
         )
+
+    def start_camera(self, vertices: np.ndarray) -> None:
+        """Render the depth image once (static terrain) and publish it at the camera rate."""
+        try:
+            config = PerceptionConfig.load(self.p.perception_config)
+        except (OSError, PerceptionError) as err:
+            raise ValueError(f"parameter perception_config: {err}") from err
+        width, height = self.p.image_size
+        f = self.p.focal_px
+        K = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+        depth = render_depth(
+            vertices,
+            K,
+            config.extrinsic.T_plane_camera,
+            (width, height),
+            self.rng,
+            config.depth_noise,
+            calibration_error=np.asarray(self.p.calibration_error),
+        )
+        image_pub = self.create_publisher(Image, "depth/image", qos.SENSOR)
+        info_pub = self.create_publisher(CameraInfo, "depth/camera_info", qos.SENSOR)
+
+        def publish() -> None:
+            stamp = header(self, "depth_camera")
+            info_pub.publish(convert.camera_info(K, width, height, stamp))
+            image_pub.publish(convert.depth_to_image(depth, stamp))
+
+        self.create_timer(1.0 / self.p.camera_rate_hz, publish)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

@@ -1,0 +1,63 @@
+"""Start the processes a launch file declares, without the launch packages (tests, make demo).
+
+Each node runs its ``scripts/`` executable with the launch file's parameters and remappings
+(``tools.launch_xml``); output goes to ``<log_dir>/<node>.log``. ``ros2 launch`` does the same
+on a ROS 2 install.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import subprocess
+import sys
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from tactile_dock_ros.tools import launch_xml
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # source tree: launch/, config/, scripts/
+LAUNCH_FILE = PACKAGE_ROOT / "launch" / "tactile_dock.launch.xml"
+
+
+def nodes(arguments: dict[str, str]) -> list[launch_xml.NodeLaunch]:
+    return launch_xml.parse(LAUNCH_FILE, {"tactile_dock_ros": PACKAGE_ROOT}, arguments)
+
+
+@contextlib.contextmanager
+def running(
+    arguments: dict[str, str], log_dir: Path, only: Iterable[str] | None = None
+) -> Iterator[dict[str, subprocess.Popen]]:
+    """Run the launch file's nodes (all, or those named in ``only``) until the block exits."""
+    log_dir = Path(log_dir)
+    log_dir.mkdir(parents=True, exist_ok=True)
+    wanted = None if only is None else set(only)
+    processes: dict[str, subprocess.Popen] = {}
+    try:
+        for node in nodes(arguments):
+            if wanted is not None and node.name not in wanted:
+                continue
+            log = open(log_dir / f"{node.name}.log", "w")
+            processes[node.name] = subprocess.Popen(
+                node.command(PACKAGE_ROOT / "scripts", log_dir, sys.executable),
+                stdout=log,
+                stderr=subprocess.STDOUT,
+            )
+            log.close()
+        yield processes
+    finally:
+        stop(processes.values())
+
+
+def stop(processes: Iterable[subprocess.Popen], timeout_s: float = 10.0) -> None:
+    """SIGINT (rclpy shuts down cleanly), then SIGKILL whatever is still running."""
+    processes = list(processes)
+    for p in processes:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in processes:
+        try:
+            p.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
