@@ -50,3 +50,20 @@ def node_from_launch(
         if node is not None:
             node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+@contextlib.contextmanager
+def node_with_driver(spec, params_dir, extra_args: list[str] = ()):
+    """The node ``spec`` plus a 'driver' node in the same context, and an executor of both."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    with node_from_launch(spec, params_dir, extra_args) as (node, context):
+        driver = Node("test_driver", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        executor.add_node(driver)
+        try:
+            yield node, driver, executor
+        finally:
+            executor.shutdown()
+            driver.destroy_node()

@@ -164,3 +164,27 @@ def test_mock_tool_never_enters_the_solid(velocities):
             sim.step(np.array(v), DT)
             below = np.interp(sim.tool[0], notch[::-1, 0], notch[::-1, 1])
             assert sim.tool[1] >= below - 1e-9
+
+
+def test_lateral_compliance_makes_a_marginal_slope_slip_far():
+    """28 degrees against a 26.6 degree friction cone: a stiff arm barely moves, a laterally
+    compliant one slides (paper Sec. III-A2), so the stick/slip test can tell."""
+    angle = np.deg2rad(28.0)
+    slope = np.array([[np.cos(angle), -np.sin(angle)], [-np.cos(angle), np.sin(angle)]])
+    slides = {}
+    for lateral in (500.0, 25.0):
+        sim = PointToolSim(slope, False, 0.5, 500.0, [0.0, 0.01], lateral_stiffness=lateral)
+        for _ in range(300):
+            sim.step([0.0, -0.05], DT)
+        slides[lateral] = abs(sim.tool[0])
+        below = np.interp(sim.tool[0], slope[::-1, 0], slope[::-1, 1])
+        assert sim.tool[1] >= below - 1e-9
+    assert slides[500.0] < 0.01 < 0.05 < slides[25.0]
+
+
+def test_tool_slides_off_the_end_of_an_open_polyline():
+    ramp = np.array([[0.1, -0.2], [-0.1, 0.0]])  # 45 degrees, ends at x = 0.1
+    sim = PointToolSim(ramp, False, 0.5, 500.0, [0.0, 0.2], lateral_stiffness=25.0)
+    for _ in range(700):
+        sim.step([0.0, -0.1], DT)
+    assert sim.tool[0] > 0.1 and np.linalg.norm(sim.force) < 1e-9  # free, past the end

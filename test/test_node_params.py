@@ -60,7 +60,7 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("executor", "workspace_min:=[2.0, 2.0]", "workspace_min must be below"),
         ("mock_hardware", "rate_hz:=0.0", "rate_hz"),
         ("mock_hardware", "stiffness:=500", "stiffness"),  # an integer where a float is due
-        ("perception", "prior_source:=lidar", "prior_source"),
+        ("perception", "capture:=sometimes", "capture"),
     ],
 )
 def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path):

@@ -160,7 +160,7 @@ class ExecutorNode(Node):
         )
         self.report_pub.publish(convert.report_to_msg(report, header(self, self.p.plane_frame_id)))
         if outcome is Outcome.ABORTED:
-            self.get_logger().warn(f"plan {plan_id}: ABORTED: {detail}")
+            self.get_logger().warning(f"plan {plan_id}: ABORTED: {detail}")
 
 
 def main(args: list[str] | None = None) -> int:

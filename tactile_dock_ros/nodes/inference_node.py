@@ -71,7 +71,7 @@ class InferenceNode(Node):
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
         if report.plan_id in self.handled_plans:
-            self.get_logger().warn(f"plan {report.plan_id}: duplicate report ignored")
+            self.get_logger().warning(f"plan {report.plan_id}: duplicate report ignored")
             return
         self.handled_plans.add(report.plan_id)
         new = report.history

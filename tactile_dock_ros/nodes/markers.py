@@ -10,7 +10,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from tactile_dock_ros.core.history import History, Status
 
 # Colours per contact status: free grey, collide orange, stick green, slips red / magenta.
-_STATUS_RGBA = {
+STATUS_RGBA = {
     Status.FREE: (0.6, 0.6, 0.6, 1.0),
     Status.COLLIDE: (1.0, 0.5, 0.0, 1.0),
     Status.STICK: (0.0, 0.8, 0.0, 1.0),
@@ -40,7 +40,7 @@ def polylines(header: Header, ns: str, vertices: np.ndarray, rgba) -> list[Marke
 
 def history(header: Header, observed: History) -> list[Marker]:
     return [
-        _strip(header, "history", i, [a, b], _STATUS_RGBA[Status(s)], 0.005)
+        _strip(header, "history", i, [a, b], STATUS_RGBA[Status(s)], 0.005)
         for i, (a, b, s) in enumerate(zip(observed.a, observed.b, observed.status, strict=True))
     ]
 

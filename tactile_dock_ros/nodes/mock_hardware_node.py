@@ -44,7 +44,9 @@ PARAMS = [
     Param("seed", 0, "seed of the ground-truth draw", "", 0, 2**31 - 1),
     Param("terrain_file", "", "YAML terrain file; overrides problem and seed when set"),
     Param("rate_hz", 200.0, "simulation and sensor publication rate", "Hz", 1.0, 2000.0),
-    Param("stiffness", 500.0, "arm/tool contact stiffness", "N/m", 1.0, 1e6),
+    Param("stiffness", 500.0, "arm stiffness along the motion", "N/m", 1.0, 1e6),
+    Param("lateral_stiffness", 25.0, "arm stiffness across the motion", "N/m", 0.01, 1e6),
+    Param("max_slide_speed", 0.3, "fastest slide along the surface", "m/s", 1e-3, 10.0),
     Param("command_timeout", 0.2, "a command older than this counts as zero", "s", 0.001, 5.0),
     Param("pose_noise", 0.0001, "tool position noise (std per axis)", "m", 0.0, 0.01),
     Param("force_noise", 0.05, "force noise (std per axis)", "N", 0.0, 10.0),
@@ -83,7 +85,15 @@ class MockHardwareNode(Node):
         vertices, closed, friction, start = load_terrain(
             self.p.problem, self.p.seed, self.p.terrain_file
         )
-        self.sim = PointToolSim(vertices, closed, friction, self.p.stiffness, start)
+        self.sim = PointToolSim(
+            vertices,
+            closed,
+            friction,
+            self.p.stiffness,
+            start,
+            self.p.lateral_stiffness,
+            self.p.max_slide_speed,
+        )
         self.rng = np.random.default_rng(self.p.noise_seed)
         self.dt = 1.0 / self.p.rate_hz
         self.velocity = np.zeros(2)

@@ -1,15 +1,18 @@
 """Time-stepped point tool against a ground-truth polyline: compliance and Coulomb friction.
 
 The mock arm tracks the commanded Cartesian velocity with a setpoint ``s`` (integrated each
-step) and a stiff linear spring (``stiffness`` N/m) between ``s`` and the tool point ``p``. The
-tool never enters the solid: it moves to ``s`` if that is free, else stops at the first surface
-point ``h`` on the way. There the spring push f = k (s - h) splits into a normal part f_n
-(into the surface) and a tangential part f_t; Coulomb friction holds the tool while
-|f_t| <= mu f_n (stick), otherwise it slides along the edge until |f_t| = mu f_n (quasi-static
-slip), clamped to the edge and stopped by any other edge on the way. This is the compliant
-motion model of the paper (Sec. V-A) made time-stepped. Edges are oriented as in
-``core.shape``: walking c -> d the solid is on the left, the outward normal on the right.
-The measured force is the environment's force on the tool, k (p - s), zero in free space.
+step) and a linear spring between ``s`` and the tool point ``p`` with stiffness ``stiffness``
+(N/m) along the current motion direction d (the last non-zero command) and
+``lateral_stiffness`` across it: K = k d d^T + k_lat (I - d d^T). A small k_lat is the paper's
+arm that is compliant perpendicular to the motion (Sec. III-A2); k_lat = k is isotropic.
+The tool never enters the solid: it moves to ``s`` if that is free, else stops at the first
+surface point ``h`` on the way. There the push f = K (s - h) splits into a normal part f_n (into
+the surface) and a tangential part f_t; Coulomb friction holds the tool while
+|f_t| <= mu f_n (stick), otherwise it slides along the edge to where |f_t| = mu f_n
+(quasi-static slip, solved in closed form for the linear spring), at most ``max_slide_speed``
+per second, clamped to the edge and stopped by any other edge on the way. Edges are oriented as
+in ``core.shape``: walking c -> d the solid is on the left, the outward normal on the right.
+The measured force is the environment's force on the tool, -K (s - p), zero in free space.
 """
 
 from __future__ import annotations
@@ -22,12 +25,26 @@ _EPS = 1e-9  # slack on segment parameters, dimensionless
 class PointToolSim:
     """Quasi-static simulation of a point tool; positions in metres, forces in newtons."""
 
-    def __init__(self, vertices, closed: bool, friction: float, stiffness: float, start) -> None:
+    def __init__(
+        self,
+        vertices,
+        closed: bool,
+        friction: float,
+        stiffness: float,
+        start,
+        lateral_stiffness: float | None = None,
+        max_slide_speed: float = np.inf,
+    ) -> None:
         v = np.asarray(vertices, float)
         if v.ndim != 2 or v.shape[1] != 2 or len(v) < 2 or not np.all(np.isfinite(v)):
             raise ValueError("vertices must be a finite (n >= 2, 2) array")
-        if friction < 0 or stiffness <= 0:
-            raise ValueError("friction must be >= 0 and stiffness > 0")
+        lateral = stiffness if lateral_stiffness is None else lateral_stiffness
+        if friction < 0 or stiffness <= 0 or not 0 < lateral <= stiffness or max_slide_speed <= 0:
+            raise ValueError(
+                "need friction >= 0, stiffness > 0, 0 < lateral_stiffness <= stiffness and "
+                "max_slide_speed > 0"
+            )
+        self.closed = bool(closed)
         idx = np.arange(len(v) if closed else len(v) - 1)
         self.c, self.d = v[idx], v[(idx + 1) % len(v)]
         length = np.linalg.norm(self.d - self.c, axis=1)
@@ -35,53 +52,83 @@ class PointToolSim:
         self.c, self.d, length = self.c[keep], self.d[keep], length[keep]
         self.tangent = (self.d - self.c) / length[:, None]
         self.normal = np.stack([self.tangent[:, 1], -self.tangent[:, 0]], axis=1)
-        self.friction, self.stiffness = float(friction), float(stiffness)
+        self.friction, self.stiffness, self.lateral = float(friction), float(stiffness), lateral
+        self.max_slide_speed = float(max_slide_speed)
+        self.direction = np.array([1.0, 0.0])
         self.tool = np.asarray(start, float).copy()
         self.setpoint = self.tool.copy()
         self.contact_edge: int | None = None
 
     @property
+    def stiffness_matrix(self) -> np.ndarray:
+        """K (2, 2) N/m for the current motion direction."""
+        dd = np.outer(self.direction, self.direction)
+        return self.stiffness * dd + self.lateral * (np.eye(2) - dd)
+
+    @property
     def force(self) -> np.ndarray:
         """Environment force on the tool (2,) N: zero in free space."""
-        return self.stiffness * (self.tool - self.setpoint)
+        return self.stiffness_matrix @ (self.tool - self.setpoint)
 
-    def _first_hit(self, p: np.ndarray, q: np.ndarray, skip: int | None = None):
-        """Earliest edge entered along p -> q: (edge index, point) or (None, None)."""
+    def _hits(self, p: np.ndarray, q: np.ndarray, skip=()):
+        """Edges entered first along p -> q (ties at a shared vertex), and the point.
+
+        Returns (indices array, point) or (empty, None) when p -> q is free.
+        """
         r = q - p
         e = self.d - self.c
         denom = r[0] * e[:, 1] - r[1] * e[:, 0]
         w = self.c - p
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / denom
             u = (w[:, 0] * r[1] - w[:, 1] * r[0]) / denom
         entering = (self.normal @ r) < 0
         ok = entering & (np.abs(denom) > 1e-15) & (t >= -_EPS) & (t <= 1 + _EPS)
         ok &= (u >= -_EPS) & (u <= 1 + _EPS)
-        if skip is not None:
-            ok[skip] = False
+        ok[list(skip)] = False
         if not ok.any():
-            return None, None
-        i = int(np.flatnonzero(ok)[np.argmin(t[ok])])
-        return i, p + max(t[i], 0.0) * r
+            return np.zeros(0, int), None
+        first = t[ok].min()
+        ties = np.flatnonzero(ok & (t <= first + _EPS))
+        return ties, p + max(first, 0.0) * r
+
+    def _slide_range(self, edge: int, length: float) -> tuple[float, float]:
+        """Where a slide along ``edge`` may end: its vertices, except an open polyline's first
+        and last vertex, off which the tool slides free."""
+        low = -np.inf if edge == 0 and not self.closed else 0.0
+        high = np.inf if edge == len(self.c) - 1 and not self.closed else length
+        return low, high
 
     def step(self, velocity, dt: float) -> None:
         """Advance the setpoint by velocity (2,) m/s over dt seconds and resolve the tool."""
-        self.setpoint = self.setpoint + np.asarray(velocity, float) * dt
-        edge, hit = self._first_hit(self.tool, self.setpoint)
-        self.contact_edge = edge
-        if edge is None:
+        velocity = np.asarray(velocity, float)
+        speed = float(np.linalg.norm(velocity))
+        if speed > 0:
+            self.direction = velocity / speed
+        self.setpoint = self.setpoint + velocity * dt
+        edges, hit = self._hits(self.tool, self.setpoint)
+        self.contact_edge = int(edges[0]) if len(edges) else None
+        if hit is None:
             self.tool = self.setpoint.copy()
             return
-        push = self.stiffness * (self.setpoint - hit)
-        f_n = -float(push @ self.normal[edge])
-        f_t = float(push @ self.tangent[edge])
-        excess = abs(f_t) - self.friction * f_n
-        if excess <= 0:
-            self.tool = hit
-            return
-        along = float((hit - self.c[edge]) @ self.tangent[edge])
-        length = float(np.linalg.norm(self.d[edge] - self.c[edge]))
-        target_along = np.clip(along + np.sign(f_t) * excess / self.stiffness, 0.0, length)
-        slid = self.c[edge] + target_along * self.tangent[edge]
-        other, blocked = self._first_hit(hit, slid, skip=edge)
-        self.tool = slid if other is None else blocked
+        K = self.stiffness_matrix
+        push = K @ (self.setpoint - hit)
+        slides = []
+        for edge in edges:  # one edge, or the two edges meeting at a vertex
+            t, n = self.tangent[edge], self.normal[edge]
+            f_n, f_t = -float(push @ n), float(push @ t)
+            excess = abs(f_t) - self.friction * f_n
+            if excess <= 0:  # held by friction on this edge
+                self.tool = hit
+                return
+            # Sliding by delta along sign(f_t) t: |f_t| falls by a delta, f_n grows by sign c delta.
+            sign = np.sign(f_t)
+            rate = float(t @ K @ t) + self.friction * sign * float(n @ K @ t)
+            delta = min(excess / rate if rate > 0 else np.inf, self.max_slide_speed * dt)
+            along = float((hit - self.c[edge]) @ t)
+            length = float(np.linalg.norm(self.d[edge] - self.c[edge]))
+            target = np.clip(along + sign * delta, *self._slide_range(edge, length))
+            slides.append((abs(target - along), self.c[edge] + target * t, edge))
+        _, slid, edge = max(slides, key=lambda item: item[0])  # the edge the tool can slide on
+        _, blocked = self._hits(hit, slid, skip=edges)  # edges meeting at hit do not block
+        self.tool = slid if blocked is None else blocked

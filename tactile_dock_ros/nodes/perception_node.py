@@ -96,7 +96,7 @@ class PerceptionNode(Node):
             try:
                 result = perceive(depth, K, self.config, self.rng)
             except PerceptionError as err:
-                self.get_logger().warn(f"no prior from this frame: {err}")
+                self.get_logger().warning(f"no prior from this frame: {err}")
                 return
         self.pending = False
         self.publish_prior(result.prior, f"depth {msg.width}x{msg.height}", watch.seconds)

@@ -8,6 +8,7 @@ on a ROS 2 install.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import subprocess
 import sys
@@ -33,6 +34,9 @@ def running(
     log_dir.mkdir(parents=True, exist_ok=True)
     wanted = None if only is None else set(only)
     processes: dict[str, subprocess.Popen] = {}
+    # The scripts import the package of this source tree, as the work tree's tests do.
+    path = [str(PACKAGE_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
     try:
         for node in nodes(arguments):
             if wanted is not None and node.name not in wanted:
@@ -42,6 +46,7 @@ def running(
                 node.command(PACKAGE_ROOT / "scripts", log_dir, sys.executable),
                 stdout=log,
                 stderr=subprocess.STDOUT,
+                env=environment,
             )
             log.close()
         yield processes

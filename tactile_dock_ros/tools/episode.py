@@ -1,0 +1,212 @@
+"""Run one docking episode against a running node suite and record it (make demo, tests).
+
+:class:`EpisodeClient` is an rclpy node that listens to everything an episode produces (prior,
+samples, history, plans, reports, the planner's ``episode_status``, the commands to the arm and
+the mock ground truth), calls ``start_episode`` and waits, bounded, for the end. The record
+gives the per-cycle progress lines, the latency breakdown and the episode figure.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import TwistStamped
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    DockingPlan,
+    ExecutionReport,
+    ShapeDistribution,
+    ShapeSamples,
+)
+from tactile_dock_ros.nodes import convert, qos
+
+FINAL_STATES = ("DOCKED", "GAVE_UP", "ABORTED")
+
+
+@dataclass
+class EpisodeRecord:
+    """Everything one episode published, as received."""
+
+    prior: ShapeDistribution | None = None
+    truth: ShapeDistribution | None = None
+    perception_seconds: float | None = None
+    samples: list = field(default_factory=list)
+    history: ContactHistory | None = None
+    plans: list = field(default_factory=list)
+    reports: list = field(default_factory=list)
+    status: DiagnosticStatus | None = None
+    command_speeds: list = field(default_factory=list)  # m/s of every command to the arm
+    wall_seconds: float = 0.0
+
+    @property
+    def state(self) -> str:
+        return self.status.message.split(":")[0] if self.status is not None else "NONE"
+
+    @property
+    def values(self) -> dict[str, str]:
+        return {kv.key: kv.value for kv in self.status.values} if self.status else {}
+
+    def cycles(self) -> list[dict]:
+        """Per cycle: p_dock, decision, outcome and the latencies the planner recorded."""
+        values, out = self.values, []
+        for i, plan in enumerate(self.plans, start=1):
+            cycle = {
+                "cycle": i,
+                "p_dock": plan.docking_probability,
+                "decision": "DOCK" if plan.decision == DockingPlan.DOCK else "GIVE_UP",
+                "outcome": values.get(f"cycle{i}.outcome", "-") or "-",
+            }
+            for key in ("inference_s", "planning_s", "execution_s"):
+                cycle[key] = (
+                    float(values[f"cycle{i}.{key}"]) if f"cycle{i}.{key}" in values else None
+                )
+            out.append(cycle)
+        return out
+
+
+class EpisodeClient(Node):
+    """Listens to the suite; :meth:`run` starts one episode and waits for its end."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("episode_client", **kwargs)
+        self.record = EpisodeRecord()
+        self.printed = 0
+        self.start_client = self.create_client(Trigger, "start_episode")
+        subscriptions = [
+            (ShapeDistribution, "terrain_prior", "prior", qos.LATCHED),
+            (ShapeDistribution, "/mock_hardware/ground_truth", "truth", qos.LATCHED),
+            (ContactHistory, "contact_history", "history", qos.LATCHED),
+            (DiagnosticStatus, "episode_status", "status", qos.LATCHED),
+        ]
+        for msg_type, topic, attribute, profile in subscriptions:
+            self.create_subscription(
+                msg_type, topic, lambda m, a=attribute: setattr(self.record, a, m), profile
+            )
+        self.create_subscription(
+            ShapeSamples, "shape_samples", self.record.samples.append, qos.LATCHED
+        )
+        self.create_subscription(DockingPlan, "plan", self.record.plans.append, qos.EVENTS)
+        self.create_subscription(
+            ExecutionReport, "execution_report", self.record.reports.append, qos.EVENTS
+        )
+        self.create_subscription(
+            DiagnosticStatus, "/perception/status", self.on_perception, qos.LATCHED
+        )
+        self.create_subscription(TwistStamped, "/arm/cmd_twist", self.on_command, qos.COMMAND)
+
+    def on_perception(self, msg: DiagnosticStatus) -> None:
+        values = {kv.key: kv.value for kv in msg.values}
+        self.record.perception_seconds = float(values.get("seconds", "nan"))
+
+    def on_command(self, msg: TwistStamped) -> None:
+        v = msg.twist.linear
+        self.record.command_speeds.append(float(np.linalg.norm([v.x, v.y, v.z])))
+
+    def spin_until(self, executor, done, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        return bool(done())
+
+    def run(self, executor, timeout_s: float, progress=print) -> EpisodeRecord:
+        """Wait for the suite (prior, service, plan/report matches), start, wait for the end."""
+        ready = self.spin_until(
+            executor,
+            lambda: (
+                self.record.prior is not None
+                and self.start_client.service_is_ready()
+                and self.count_publishers("plan") > 0
+                and self.count_publishers("execution_report") > 0
+                and self.count_publishers("shape_samples") > 0
+            ),
+            timeout_s,
+        )
+        if not ready:
+            raise TimeoutError("the node suite did not come up (prior, start_episode, topics)")
+        t0 = time.monotonic()
+        future = self.start_client.call_async(Trigger.Request())
+        self.spin_until(executor, future.done, 10.0)
+        if not future.done() or not future.result().success:
+            raise RuntimeError(f"start_episode failed: {future.result() if future.done() else ''}")
+        self.spin_until(executor, lambda: self._progress(progress) in FINAL_STATES, timeout_s)
+        self.record.wall_seconds = time.monotonic() - t0
+        return self.record
+
+    def _progress(self, progress) -> str:
+        cycles = [c for c in self.record.cycles() if c["outcome"] != "-" or c["decision"] != "DOCK"]
+        for cycle in cycles[self.printed :]:
+            progress(format_cycle(cycle))
+        self.printed = max(self.printed, len(cycles))
+        return self.record.state
+
+
+def format_cycle(c: dict) -> str:
+    def ms(key):
+        return "-" if c[key] is None else f"{1000 * c[key]:.0f} ms"
+
+    return (
+        f"cycle {c['cycle']}: P_dock={c['p_dock']:.3f} decision={c['decision']} "
+        f"outcome={c['outcome']}  (inference {ms('inference_s')}, planning {ms('planning_s')}, "
+        f"execution {ms('execution_s')})"
+    )
+
+
+def latency_table(record: EpisodeRecord) -> str:
+    """Median and max per stage over the cycles, plus perception and the episode wall time."""
+    rows = []
+    if record.perception_seconds is not None:
+        rows.append(("perception (prior)", [record.perception_seconds]))
+    for key, label in (("inference_s", "inference"), ("planning_s", "planning"),
+                       ("execution_s", "execution")):  # fmt: skip
+        values = [c[key] for c in record.cycles() if c[key] is not None]
+        if values:
+            rows.append((label, values))
+    lines = [f"{'stage':<20} {'cycles':>6} {'median':>10} {'max':>10}"]
+    for label, values in rows:
+        lines.append(
+            f"{label:<20} {len(values):>6} {np.median(values):>9.3f}s {np.max(values):>9.3f}s"
+        )
+    lines.append(f"{'episode wall time':<20} {'':>6} {record.wall_seconds:>9.3f}s")
+    return "\n".join(lines)
+
+
+def plot(record: EpisodeRecord, path: Path) -> None:
+    """Episode figure: truth, prior mean, last posterior samples, history, planned paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tactile_dock_ros.nodes.markers import STATUS_RGBA
+
+    fig, ax = plt.subplots(figsize=(7, 6))
+    if record.samples:
+        for v in convert.samples_from_msg(record.samples[-1])[:30]:
+            ax.plot(v[:, 0], v[:, 1], color=(0.2, 0.4, 1.0), alpha=0.15, lw=1)
+    if record.prior is not None:
+        mean = convert.shape_from_msg(record.prior).mean_vertices
+        ax.plot(mean[:, 0], mean[:, 1], "b--", lw=1, label="prior mean")
+    if record.truth is not None:
+        truth = convert.shape_from_msg(record.truth).mean_vertices
+        ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2, label="ground truth")
+    for plan in record.plans:
+        w = np.array([[p.x, p.y] for p in plan.waypoints]).reshape(-1, 2)
+        ax.plot(w[:, 0], w[:, 1], ":", color="0.4", lw=1)
+    if record.history is not None and record.history.segments:
+        history = convert.history_from_segments(record.history.segments)
+        for a, b, s in zip(history.a, history.b, history.status, strict=True):
+            ax.plot([a[0], b[0]], [a[1], b[1]], color=STATUS_RGBA[int(s)][:3], lw=3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"episode: {record.state} after {len(record.plans)} cycles")
+    ax.legend(loc="upper right")
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)

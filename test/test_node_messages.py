@@ -1,0 +1,95 @@
+"""Malformed messages are logged and dropped without corrupting a node's state (in-process)."""
+
+import importlib.util
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from node_helpers import launch_nodes, node_with_driver
+from ros_helpers import spin_until
+from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+
+from tactile_dock_ros.nodes import convert, qos
+
+pytestmark = pytest.mark.dds
+
+
+def _plan_msg(plan_id, waypoints):
+    command = convert.PlanCommand(
+        plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), 3.0, 0.1, False,
+        0.5, 0.5, 0, "",
+    )  # fmt: skip
+    return convert.plan_to_msg(command, convert.Header(frame_id="dock_plane"))
+
+
+def _pose(x, y, z):
+    msg = PoseStamped()
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    return msg
+
+
+def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
+    spec = launch_nodes("mock")["executor"]
+    reports, commands = [], []
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
+        poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
+        driver.create_subscription(ExecutionReport, "execution_report", reports.append, qos.EVENTS)
+        driver.create_subscription(TwistStamped, "/arm/cmd_twist", commands.append, qos.COMMAND)
+        assert spin_until(executor, lambda: plans.get_subscription_count() > 0, 10.0)
+
+        # A NaN pose and a NaN wrench are dropped: the tool stays unknown, no bias sample counted.
+        poses.publish(_pose(float("nan"), 0.6, 0.3))
+        wrench = WrenchStamped()
+        wrench.wrench.force.x = float("nan")
+        wrenches.publish(wrench)
+        # A malformed plan (NaN waypoint) never runs and gets no report ...
+        plans.publish(_plan_msg(1, [[0.0, np.nan], [0.0, 0.1]]))
+        # ... so the next valid one is not "busy"; without a pose it aborts on the timeout.
+        plans.publish(_plan_msg(2, [[0.0, 0.3], [0.0, 0.1]]))
+        assert spin_until(executor, lambda: len(reports) == 1, 10.0)
+        assert node.tool is None and not node.filter.ready and node.filter._count == 0
+        first = convert.report_from_msg(reports[0])
+        assert first.plan_id == 2 and first.outcome == ExecutionReport.ABORTED
+        assert "no tool pose" in first.detail
+
+        # With a pose but no F/T data the run aborts with a zero command.
+        assert spin_until(executor, lambda: node.tool is not None or poses.publish(
+            _pose(0.0, 0.6, 0.3)), 10.0)  # fmt: skip
+        plans.publish(_plan_msg(3, [[0.0, 0.3], [0.0, 0.1]]))
+        assert spin_until(executor, lambda: len(reports) == 2, 10.0)
+    second = convert.report_from_msg(reports[1])
+    assert second.plan_id == 3 and second.outcome == ExecutionReport.ABORTED
+    assert "sensor timeout" in second.detail
+    last = commands[-1].twist.linear
+    assert (last.x, last.y, last.z) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("tactile_dock_ros.core.sampling") is None,
+    reason="tactile_dock_ros.core.sampling is not in this tree yet",
+)
+def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
+    from tactile_dock_ros.msg import ContactHistory
+
+    spec = launch_nodes("mock")["inference"]
+    histories = []
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        reports = driver.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
+        driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        good = convert.Report(
+            1, ExecutionReport.NO_CONTACT,
+            convert.history_from_segments([]).extend([0.0, 0.5], [0.0, 0.2], [0]),
+            np.array([0.0, 0.2]), "",
+        )  # fmt: skip
+        msg = convert.report_to_msg(good, convert.Header(frame_id="dock_plane"))
+        bad_status = convert.report_to_msg(good, convert.Header())
+        bad_status.plan_id, bad_status.segments[0].status = 2, 17
+        empty = convert.report_to_msg(good, convert.Header())
+        empty.plan_id, empty.outcome = 3, 99
+        for report in (bad_status, empty, msg):
+            reports.publish(report)
+        assert spin_until(executor, lambda: len(node.history) == 1, 10.0)
+        assert node.handled_plans == {1}
