@@ -1,6 +1,6 @@
 # Two commands do all setup on a fresh machine:
 #   make test   venv + pinned wheels + Debian packages + message build, then pytest
-#   (make demo arrives with the node suite)
+#   make demo   the same setup, then one docking episode on the mock profile (episode.png)
 # Every step is stamped, so a second run with nothing changed goes straight to pytest.
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
@@ -13,13 +13,19 @@ PYTEST_ARGS ?=
 # Run-time environment: ament_index finds our share/ directory in the venv prefix.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 
-.PHONY: test setup lint format bench-help clean distclean
+.PHONY: test setup lint format bench-help clean distclean demo
 .DEFAULT_GOAL := test
 
 setup: $(STAMPS)/msgs
 
 test: setup
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+# One episode on the mock profile: the five nodes as processes (as `ros2 launch ... profile:=mock`
+# would start them), per-cycle progress, result, latency breakdown, episode.png; exit 0 on DOCKED.
+DEMO_ARGS ?= --problem sloper --seed 0
+demo: setup
+	$(PY) -m tactile_dock_ros.tools.demo $(DEMO_ARGS) --png episode.png
 
 lint: $(STAMPS)/venv
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
