@@ -137,10 +137,17 @@ class EpisodeClient(Node):
             raise RuntimeError(f"start_episode failed: {future.result() if future.done() else ''}")
         self.spin_until(executor, lambda: self._progress(progress) in FINAL_STATES, timeout_s)
         self.record.wall_seconds = time.monotonic() - t0
+        # Topics are not ordered with each other: let in-flight reports arrive (bounded).
+        docking = sum(p.decision == DockingPlan.DOCK for p in self.record.plans)
+        self.spin_until(executor, lambda: len(self.record.reports) >= docking, 5.0)
         return self.record
 
     def _progress(self, progress) -> str:
-        cycles = [c for c in self.record.cycles() if c["outcome"] != "-" or c["decision"] != "DOCK"]
+        cycles = [
+            c
+            for c in self.record.cycles()
+            if c["planning_s"] is not None and (c["outcome"] != "-" or c["decision"] != "DOCK")
+        ]
         for cycle in cycles[self.printed :]:
             progress(format_cycle(cycle))
         self.printed = max(self.printed, len(cycles))
