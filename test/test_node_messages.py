@@ -93,3 +93,37 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
             reports.publish(report)
         assert spin_until(executor, lambda: len(node.history) == 1, 10.0)
         assert node.handled_plans == {1}
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
+    reason="tactile_dock_ros.core.planner is not in this tree yet",
+)
+def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
+    from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
+
+    spec = launch_nodes("mock")["planner"]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
+        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        publishers = (samples, history, prior)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in publishers), 10)
+        good = np.random.default_rng(0).normal(size=(3, 4, 2))
+        bad_samples = convert.samples_to_msg(good, convert.Header(), "hmc", 3.0, 0)
+        bad_samples.num_samples = 4  # size mismatch
+        segment = convert.history_to_msg(
+            convert.history_from_segments([]).extend([0.0, 0.5], [0.0, 0.2], [0]), convert.Header()
+        )
+        segment.segments[0].status = 11  # unknown status
+        empty_prior = ShapeDistribution(num_vertices=0)
+        samples.publish(bad_samples)
+        history.publish(segment)
+        prior.publish(empty_prior)
+        samples_ok = convert.samples_to_msg(good, convert.Header(), "hmc", 3.0, 0)
+        samples_ok.header.frame_id = "after"
+        # A valid message sent after the bad ones arrives: the bad ones were handled (dropped).
+        samples.publish(samples_ok)
+        assert spin_until(executor, lambda: node.samples is not None, 10.0)
+        assert node.samples[0].header.frame_id == "after"
+        assert node.history is None and node.prior is None and node.state == "IDLE"
