@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
 }
 
 
