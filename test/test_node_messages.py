@@ -127,3 +127,29 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
         assert spin_until(executor, lambda: node.samples is not None, 10.0)
         assert node.samples[0].header.frame_id == "after"
         assert node.history is None and node.prior is None and node.state == "IDLE"
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
+    reason="tactile_dock_ros.core.planner is not in this tree yet",
+)
+def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from std_srvs.srv import Trigger
+
+    spec = launch_nodes("mock")["planner"]
+    statuses = []
+    with node_with_driver(spec, tmp_path, ["-p", "planner:stage_timeout:=1.0"]) as (
+        _node, driver, executor,
+    ):  # fmt: skip
+        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        start = driver.create_client(Trigger, "start_episode")
+        assert spin_until(executor, start.service_is_ready, 10.0)
+        future = start.call_async(Trigger.Request())
+        assert spin_until(executor, future.done, 10.0) and future.result().success
+        again = start.call_async(Trigger.Request())
+        assert spin_until(executor, again.done, 10.0) and not again.result().success  # running
+        assert spin_until(
+            executor, lambda: statuses and statuses[-1].message.startswith("ABORTED"), 10.0
+        )
+    assert "posterior samples" in statuses[-1].message

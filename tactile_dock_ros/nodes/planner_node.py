@@ -41,6 +41,7 @@ PARAMS = [
     Param("max_speed", 0.1, "tool speed along the path", "m/s", 1e-4, 1.0),
     Param("compliant", False, "plan with the compliant motion model"),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
+    Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
 ]
 
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
@@ -78,6 +79,8 @@ class PlannerNode(Node):
         for msg_type, topic, callback, profile in subscriptions:
             self.create_subscription(msg_type, topic, guarded(self, topic, callback), profile)
         self.create_service(Trigger, "start_episode", self.on_start)
+        self.create_timer(0.5, self.check_stage_timeout)
+        self.stage_start = None  # node-clock seconds when the current wait began
         self.publish_status()
 
     # ------------------------------------------------------------------ inputs
@@ -105,6 +108,7 @@ class PlannerNode(Node):
         self.state, self.cycles, self.targets = RUNNING, [], []
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
+        self.stage_start = self.seconds()
         self.episode_pub.publish(UInt32(data=self.episode))
         self.get_logger().info(f"episode {self.episode}: started")
         self.publish_status()
@@ -130,10 +134,21 @@ class PlannerNode(Node):
         elif len(self.cycles) >= self.p.max_cycles:
             self.finish(GAVE_UP, f"cycle budget of {self.p.max_cycles} spent")
         else:
+            self.stage_start = self.seconds()
             self.publish_status()
             self.maybe_plan()
 
     # ------------------------------------------------------------------ planning
+
+    def seconds(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def check_stage_timeout(self) -> None:
+        """An episode never hangs: no samples or no report within stage_timeout aborts it."""
+        if self.state != RUNNING or self.seconds() - self.stage_start <= self.p.stage_timeout:
+            return
+        waiting = "execution report" if self.awaiting_plan is not None else "posterior samples"
+        self.finish(ABORTED, f"no {waiting} within {self.p.stage_timeout:.0f} s")
 
     def ready(self) -> bool:
         if self.state != RUNNING or self.awaiting_plan is not None or self.samples is None:
@@ -195,6 +210,7 @@ class PlannerNode(Node):
             self.finish(GAVE_UP, result.reason)
             return
         self.awaiting_plan = command.plan_id
+        self.stage_start = self.seconds()
         self.targets.append(command.waypoints[-1])
         self.publish_status()
 
