@@ -254,3 +254,27 @@ def test_garbage_depth_gives_a_prior_or_a_perception_error(seed, invalid):
     except PerceptionError:
         return
     assert np.all(np.isfinite(result.prior.basis))
+
+
+def test_shipped_config_runs_the_pipeline():
+    from conftest import REPO_ROOT
+
+    config = PerceptionConfig.load(REPO_ROOT / "config" / "perception.yaml")
+    np.testing.assert_allclose(config.extrinsic.T_plane_camera, T_NOMINAL, atol=1e-5)
+    result = _run(scenes.ledges(), config, seed=2)
+    assert len(result.slice.stretches) == 2
+
+
+def test_render_options_and_errors():
+    wall = np.array([[0.0, -1.0], [0.0, 2.0]])
+    rng = np.random.default_rng(0)
+    narrow = render_depth(wall, K, T_NOMINAL, SIZE, rng, half_width_m=0.05)
+    # Only the image columns within 5 cm of the plane see the extruded wall.
+    cols = np.flatnonzero(np.isfinite(narrow).any(axis=0))
+    assert 0 < cols.size < SIZE[0] / 2
+    dropped = render_depth(wall, K, T_NOMINAL, SIZE, rng, dropout=0.3)
+    assert 0.25 < np.isnan(dropped).mean() < 0.35
+    with pytest.raises(ValueError, match="terrain_vertices"):
+        render_depth(np.array([[0.0, np.nan], [0.0, 1.0]]), K, T_NOMINAL, SIZE, rng)
+    with pytest.raises(ValueError, match="image size"):
+        render_depth(wall, K, T_NOMINAL, (0, 10), rng)

@@ -59,25 +59,36 @@ class TerrainSlice:
 
 
 def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_width_m: float):
-    """Plane-frame (x, y) of valid pixels within the band; raises PerceptionError when none."""
-    depth = np.asarray(depth_m)
+    """Plane-frame (x, y) of valid pixels within the band; raises PerceptionError when none.
+
+    The plane-normal coordinate of a pixel is ``depth * (a(u) + b(v)) + t_z`` (separable in the
+    pixel column and row), so the band is found with three whole-image operations and only the
+    few in-band pixels are back-projected.
+    """
+    depth = np.asarray(depth_m, dtype=np.float32)
     if depth.ndim != 2:
         raise PerceptionError(f"depth image must be 2-D, got shape {depth.shape}")
-    v, u = np.nonzero(np.isfinite(depth) & (depth > 0))
-    if v.size == 0:
-        raise PerceptionError("depth image has no valid pixel")
-    z = depth[v, u].astype(float)
+    height, width = depth.shape
     fx, fy, cx, cy, skew = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
-    y_n = (v - cy) / fy
-    cam = np.stack([(u - cx - skew * y_n) / fx * z, y_n * z, z], axis=1)
-    pts = cam @ extrinsic.rotation.T + extrinsic.camera_centre
-    keep = np.abs(pts[:, 2]) <= half_width_m
-    if not keep.any():
+    R, t = extrinsic.rotation, extrinsic.camera_centre
+    y_n = (np.arange(height) - cy) / fy  # ray = ((u - cx - skew y_n) / fx, y_n, 1)
+    col = (R[2, 0] / fx * (np.arange(width) - cx)).astype(np.float32)
+    row = (R[2, 0] * -skew * y_n / fx + R[2, 1] * y_n + R[2, 2]).astype(np.float32)
+    with np.errstate(invalid="ignore"):
+        z_plane = depth * (row[:, None] + col[None, :]) + np.float32(t[2])
+        keep = np.abs(z_plane) <= half_width_m
+        keep &= depth > 0
+    v, u = np.nonzero(keep)
+    if v.size == 0:
+        if not np.any(np.isfinite(depth) & (depth > 0)):
+            raise PerceptionError("depth image has no valid pixel")
         raise PerceptionError(
             "no depth point lies within the band of the docking plane: the plane misses the "
             "image (check T_plane_camera)"
         )
-    return pts[keep, :2]
+    z = depth[v, u].astype(float)
+    cam = np.stack([(u - cx - skew * y_n[v]) / fx * z, y_n[v] * z, z], axis=1)
+    return cam @ R[:2].T + t[:2]
 
 
 def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: float):

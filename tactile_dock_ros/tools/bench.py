@@ -21,6 +21,7 @@ from pathlib import Path
 SUITES = {
     # suite name -> one-line description
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
+    "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
 }
 
 
