@@ -22,7 +22,7 @@ Decisions where the paper is vague:
 * Contacts of one move are treated as mutually exclusive first contacts; if the P(C_e) of the
   loading move sum to more than 1 they are scaled to sum to 1. Moves before the loading move
   must not touch: p_dock is multiplied by the prefix's no-contact probability, the product over
-  its segments and edges of 1 - P(C_e) (independence).
+  its moves of 1 - sum_e P(C_e).
 * Degenerate covariances (zero or rank-deficient) give the limit values: a constraint with zero
   variance holds with probability 1 or 0. A zero-length move touches nothing (P(C_e) = 0).
 """
@@ -97,9 +97,10 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
         var_j = np.take_along_axis(
             np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)), j, 0
         )[0]
-        mills = np.exp(-0.5 * np.minimum(hj, 1e150) ** 2 - 0.5 * np.log(2 * np.pi) - log_ndtr(hj))
-        mills = np.where(np.isfinite(hj), mills, 0.0)
-        hj_fin = np.where(np.isfinite(hj), hj, 0.0)
+        finite = np.isfinite(hj)
+        hj_fin = np.where(finite, hj, 0.0)
+        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_ndtr(hj_fin))
+        mills = np.where(finite, mills, 0.0)
         sd_j = np.sqrt(np.maximum(var_j, 0.0))
         shift = sd_j * mills  # truncated mean minus mean
         shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
@@ -203,7 +204,7 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
 
 
 def collision_probabilities(a, b, shape: GaussianShape, method: str = "bivariate") -> np.ndarray:
-    """(E,) P(C_e): probability that the move a -> b hits edge e of ``shape`` (App. B, eq. 26/30)."""
+    """(E,) P(C_e): probability that the move a -> b hits edge e (App. B, eq. 26 / 30)."""
     _check_shape(shape)
     means, covs = shape.edge_gaussians()
     return segment_collision_probabilities(a, b, means, covs, method)[0]
@@ -352,14 +353,14 @@ def dock_probabilities(
 
 
 def prefix_clear_probability(shape: GaussianShape, path, method: str = "sequential") -> float:
-    """Probability that every move of ``path`` (L, 2) touches nothing: prod over moves and edges
-    of 1 - P(C_e) (independence)."""
+    """Probability that every move of ``path`` (L, 2) touches nothing: the product over moves of
+    1 - sum_e P(C_e) (a move's first contacts are exclusive; moves independent)."""
     path = np.asarray(path, dtype=float)
     if len(path) < 2:
         return 1.0
     means, covs = shape.edge_gaussians()
     p_c = segment_collision_probabilities(path[:-1], path[1:], means, covs, method)
-    return float(np.prod(1.0 - np.clip(p_c, 0.0, 1.0)))
+    return float(np.prod(np.clip(1.0 - p_c.sum(axis=1), 0.0, 1.0)))
 
 
 def dock_probability(
