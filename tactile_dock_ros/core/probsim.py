@@ -190,17 +190,23 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
         "right": (w[R_], w[N_]),
     }
     mean_t = means[:, 2:] - means[:, :2]
-    out = []
-    for pair in rows.values():
-        extra_v = np.stack([np.broadcast_to(mean_t @ f, values.shape[1:]) for f in pair])
+    shape_ke = values.shape[1:]
+    edge_of = np.broadcast_to(np.arange(len(means)), shape_ke)
+    # Prune (Sec. IV-F): a contact no likelier than its least likely condition, here < 1e-12.
+    var = np.einsum("iked,edf,ikef->ike", grads, covs, grads)
+    live = (np.min(ndtr(_standardize(values, var)), axis=0) > 1e-12) & ~still
+    e_live = edge_of[live]
+    v_live, g_live = values[:, live], grads[:, live]  # (4, M), (4, M, 4)
+    out = np.zeros((3, *shape_ke))
+    for slot, pair in enumerate(rows.values()):
+        extra_v = np.stack([mean_t[e_live] @ f for f in pair])
         extra_g = np.stack(
-            [np.broadcast_to(np.concatenate([-f, f]), grads.shape[1:]) for f in pair]
+            [np.broadcast_to(np.concatenate([-f, f]), g_live.shape[1:]) for f in pair]
         )
-        g = np.concatenate([grads, extra_g])
-        cov_g = np.einsum("iked,edf,jkef->ijke", g, covs, g)
-        p = positive_orthant_sequential(np.concatenate([values, extra_v]), cov_g)
-        out.append(np.where(still, 0.0, p))
-    return np.stack(out)
+        g = np.concatenate([g_live, extra_g])
+        cov_g = np.einsum("imd,mdf,jmf->ijm", g, covs[e_live], g)
+        out[slot][live] = positive_orthant_sequential(np.concatenate([v_live, extra_v]), cov_g)
+    return out
 
 
 def collision_probabilities(a, b, shape: GaussianShape, method: str = "bivariate") -> np.ndarray:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
 }
 
 
