@@ -249,23 +249,22 @@ def _vertex_transitions(shape: GaussianShape, terms: dict):
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(den > 0, np.clip(num / den, 0.0, 1.0), 0.0)
 
+    def arrival(src, dst, row, cov_ds):
+        """Continue / stick on dst after sliding along src (row L_ or R_); cov_ds (V, 3, 3) is
+        Cov(functional i of dst, functional j of src)."""
+        p_src = one(src, row)
+        cont = ratio(pair(dst, row, src, row, cov_ds[:, row, row]), p_src) * ratio(
+            pair(dst, row, dst, N_, cov[dst, row, N_]), one(dst, row)
+        )
+        face = ratio(pair(dst, N_, src, row, cov_ds[:, N_, row]), p_src)
+        return cont, np.maximum(face - cont, 0.0)
+
     out = {k: np.zeros(n) for k in ("cont_left", "stick_left", "cont_right", "stick_right")}
-    # arriving by a left slide along r(v): condition on SL of r
-    p_sl_r = one(er, L_)
-    cont = ratio(pair(el, L_, er, L_, cross_cov[:, L_, L_]), p_sl_r) * ratio(
-        pair(el, L_, el, N_, cov[el, L_, N_]), one(el, L_)
+    # a left slide arrives along r(v) and goes on to l(v); a right slide the other way round
+    out["cont_left"][inner], out["stick_left"][inner] = arrival(er, el, L_, cross_cov)
+    out["cont_right"][inner], out["stick_right"][inner] = arrival(
+        el, er, R_, np.swapaxes(cross_cov, 1, 2)
     )
-    face = ratio(pair(el, N_, er, L_, cross_cov[:, N_, L_]), p_sl_r)
-    out["cont_left"][inner] = cont
-    out["stick_left"][inner] = np.maximum(face - cont, 0.0)
-    # arriving by a right slide along l(v): condition on SR of l
-    p_sr_l = one(el, R_)
-    cont = ratio(pair(el, R_, er, R_, cross_cov[:, R_, R_]), p_sr_l) * ratio(
-        pair(er, R_, er, N_, cov[er, R_, N_]), one(er, R_)
-    )
-    face = ratio(pair(el, R_, er, N_, cross_cov[:, R_, N_]), p_sr_l)
-    out["cont_right"][inner] = cont
-    out["stick_right"][inner] = np.maximum(face - cont, 0.0)
     return out
 
 
