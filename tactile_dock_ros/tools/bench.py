@@ -22,6 +22,7 @@ SUITES = {
     # suite name -> one-line description
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
+    "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
 }
 
 
