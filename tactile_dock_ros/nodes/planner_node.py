@@ -211,7 +211,8 @@ class PlannerNode(Node):
             return
         self.awaiting_plan = command.plan_id
         self.stage_start = self.seconds()
-        self.targets.append(command.waypoints[-1])
+        target = np.asarray(getattr(result, "target_point", command.waypoints[-1]), float)
+        self.targets.append(target if np.all(np.isfinite(target)) else command.waypoints[-1])
         self.publish_status()
 
     def plan(self, vertices: np.ndarray):
@@ -225,6 +226,7 @@ class PlannerNode(Node):
             self.p.contact_resolution,
             np.array(self.targets).reshape(-1, 2),
             give_up_threshold=self.p.give_up_threshold,
+            compliant=self.p.compliant,
         )
 
     # ------------------------------------------------------------------ episode status
