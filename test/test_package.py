@@ -31,6 +31,9 @@ ROSDEP_KEYS = {
     "sensor_msgs": "sensor_msgs",
     "visualization_msgs": "visualization_msgs",
     "diagnostic_msgs": "diagnostic_msgs",
+    "rcl_interfaces": "rcl_interfaces",
+    "launch": "launch",
+    "launch_testing": "launch_testing",
 }
 LOCAL = {"tactile_dock_ros"} | {p.stem for p in (REPO_ROOT / "test").glob("*.py")}
 
