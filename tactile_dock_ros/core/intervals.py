@@ -1,0 +1,219 @@
+"""Feasible interval sets along lines and ellipses; Gaussians truncated to them (IV-E, App. A).
+
+Roots of every primitive along the trajectory split the parameter range into segments; the
+sign of each primitive is constant inside a segment, so f_H is judged at segment midpoints (the
+paper's advice: away from the roots, immune to root error). Combining primitives by the max /
+min / negation structure of f_H at those midpoints *is* the interval algebra of Sec. IV-E
+(intersection = max, union = min, complement = negation), done for all segments at once.
+
+Arrays carry a leading batch axis C (independent chains). Root arrays are sorted per row and
+padded with +inf; ``owner`` gives the primitive each root belongs to (-1 for padding).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import log_ndtr, ndtri_exp
+
+# Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
+# spurious root only splits a segment in two, which the midpoint test makes harmless.
+_IMAG_TOL = 1e-6
+
+
+def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form."""
+    a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = b * b - 4 * a * c
+        q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
+        r1 = np.where(a != 0, q / a, -c / b)
+        r2 = np.where(a != 0, c / q, np.nan)
+        bad = (disc < 0) & (a != 0)
+        roots = np.stack([np.where(bad, np.nan, r1), np.where(bad, np.nan, r2)], axis=-1)
+    return np.where(np.isfinite(roots), roots, np.nan)
+
+
+def quartic_roots(coef: np.ndarray) -> np.ndarray:
+    """Real roots (..., 4) of polynomials with coefficients (..., 5), highest degree first.
+
+    Batched companion-matrix eigenvalues. A vanishing leading coefficient is replaced by a tiny
+    one, which sends that root to infinity without moving the finite ones.
+    """
+    coef = np.asarray(coef, dtype=float)
+    scale = np.abs(coef).max(axis=-1, keepdims=True)
+    coef = coef / np.where(scale > 0, scale, 1.0)
+    lead = coef[..., :1]
+    tiny = 1e-13
+    lead = np.where(np.abs(lead) < tiny, np.where(lead < 0, -tiny, tiny), lead)
+    monic = coef[..., 1:] / lead
+    comp = np.zeros((*coef.shape[:-1], 4, 4))
+    comp[..., 0, :] = -monic
+    comp[..., 1, 0] = comp[..., 2, 1] = comp[..., 3, 2] = 1.0
+    eig = np.linalg.eigvals(comp)
+    real = np.abs(eig.imag) <= _IMAG_TOL * (1.0 + np.abs(eig.real))
+    return np.where(real & (scale > 0), eig.real, np.nan)
+
+
+def trig_basis(t: np.ndarray) -> np.ndarray:
+    """(..., 5): 1, cos t, sin t, cos 2t, sin 2t."""
+    t = np.asarray(t, dtype=float)
+    return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
+
+
+def _sorted_roots(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Keep roots (C, K, r) strictly inside (lo, hi) per row; sort; pad with inf."""
+    c = roots.shape[0]
+    flat = roots.reshape(c, -1)
+    owner = np.broadcast_to(np.arange(roots.shape[1])[:, None], roots.shape[1:]).reshape(-1)
+    inside = (flat > lo[:, None]) & (flat < hi[:, None])
+    flat = np.where(inside, flat, np.inf)
+    width = max(int(inside.sum(axis=1).max(initial=0)), 0)
+    order = np.argsort(flat, axis=1)[:, :width]
+    return np.take_along_axis(flat, order, axis=1), np.where(
+        np.isfinite(np.take_along_axis(flat, order, axis=1)), owner[order], -1
+    )
+
+
+def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+    """(C, K) False where a trigonometric primitive provably keeps its sign on [0, t_max[c]]
+    (t_max < pi): |g(0)| exceeds a bound on |g(t) - g(0)| built from |k_i| and t_max."""
+    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
+    t = np.asarray(t_max, dtype=float)[:, None]
+    sin_max = np.where(t >= np.pi / 2, 1.0, np.sin(t))  # max of |sin| on [0, t]
+    change = (
+        np.abs(k1) * (1 - np.cos(t))
+        + np.abs(k2) * sin_max
+        + np.abs(k3) * 2 * sin_max**2
+        + np.abs(k4) * np.sin(np.minimum(2 * t, np.pi / 2))
+    )
+    return np.abs(k0 + k1 + k3) <= change
+
+
+def ellipse_roots(
+    coef: np.ndarray,
+    solve: np.ndarray,
+    linear: np.ndarray,
+    t_max: np.ndarray,
+    t_min: float = 1e-9,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Times in (t_min, t_max[c]) where a primitive along the ellipse vanishes, sorted (C, R).
+
+    Only primitives with ``solve`` (C, K) are solved. With u = tan(t/2) a trigonometric
+    polynomial of degree 2 becomes a quartic in u (a quadratic for ``linear`` primitives, whose
+    k3 = k4 = 0); t_max must be < pi.
+    """
+    t_max = np.asarray(t_max, dtype=float)
+    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
+    c, n_prims = k0.shape
+    roots = np.full((c, n_prims, 4), np.nan)
+    ci, ki = np.nonzero(solve & linear[None])
+    if ci.size:
+        u = quadratic_roots(k0[ci, ki] - k1[ci, ki], 2 * k2[ci, ki], k0[ci, ki] + k1[ci, ki])
+        roots[ci, ki, :2] = u
+    ci, ki = np.nonzero(solve & ~linear[None])
+    if ci.size:
+        poly = np.stack(
+            [
+                k0[ci, ki] - k1[ci, ki] + k3[ci, ki],
+                2 * k2[ci, ki] - 4 * k4[ci, ki],
+                2 * k0[ci, ki] - 6 * k3[ci, ki],
+                2 * k2[ci, ki] + 4 * k4[ci, ki],
+                k0[ci, ki] + k1[ci, ki] + k3[ci, ki],
+            ],
+            axis=-1,
+        )
+        roots[ci, ki] = quartic_roots(poly)
+    times = 2 * np.arctan(roots)
+    return _sorted_roots(times, np.full(c, t_min), t_max)
+
+
+def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters in (lo[c], hi[c]) where a primitive q0 + q1 t + q2 t^2 vanishes, sorted (C, R)."""
+    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0])
+    return _sorted_roots(roots, np.asarray(lo, float), np.asarray(hi, float))
+
+
+def segment_edges(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Segment boundaries (C, R+2) = [lo, roots..., hi] (padding collapsed onto hi) and the
+    midpoints (C, R+1)."""
+    lo = np.asarray(lo, dtype=float)[:, None]
+    hi = np.asarray(hi, dtype=float)[:, None]
+    edges = np.concatenate([lo, np.minimum(roots, hi), hi], axis=1)
+    return edges, 0.5 * (edges[:, 1:] + edges[:, :-1])
+
+
+@dataclass(frozen=True)
+class IntervalSet:
+    """Disjoint closed intervals, (r, 2) rows [start, end] sorted; r = 0 is the empty set."""
+
+    bounds: np.ndarray
+
+    @classmethod
+    def from_segments(cls, edges: np.ndarray, ok: np.ndarray) -> IntervalSet:
+        """Merge the feasible segments of one row (edges (S+1,), ok (S,)) into intervals."""
+        edges, ok = np.asarray(edges, float), np.asarray(ok, bool)
+        ok = ok & (edges[1:] > edges[:-1])
+        flags = np.concatenate([[False], ok, [False]]).astype(int)
+        change = np.diff(flags)
+        starts, ends = np.flatnonzero(change == 1), np.flatnonzero(change == -1)
+        return cls(np.stack([edges[starts], edges[ends]], axis=1).reshape(-1, 2))
+
+    def contains(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        inside = (t[..., None] >= self.bounds[:, 0]) & (t[..., None] <= self.bounds[:, 1])
+        return inside.any(axis=-1)
+
+    @property
+    def measure(self) -> float:
+        return float(np.sum(self.bounds[:, 1] - self.bounds[:, 0]))
+
+
+def normal_log_mass(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """log P(a <= X <= b) for X ~ N(0, 1), accurate far in either tail (App. A); -inf if b <= a."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    flip = (a + b) > 0  # reflect so the interval's centre is <= 0: log_ndtr is then accurate
+    lo, hi = np.where(flip, -b, a), np.where(flip, -a, b)
+    lp_lo, lp_hi = log_ndtr(lo), log_ndtr(hi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = lp_hi + np.log(-np.expm1(lp_lo - lp_hi))
+    return np.where(hi > lo, out, -np.inf)
+
+
+def sample_truncated_normal(
+    edges: np.ndarray,
+    ok: np.ndarray,
+    mean: np.ndarray,
+    std: np.ndarray,
+    rng: np.random.Generator,
+    log_weight: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One draw per row of N(mean, std^2) restricted to the union of ``ok`` segments (App. A).
+
+    edges (C, S+1), ok (C, S). A segment is chosen with probability proportional to its mass
+    (times exp(log_weight) if given), then the draw is an inverse-CDF sample inside it computed
+    in log space, safe in the far tails. Returns (draws (C,), found (C,) bool); rows without
+    any feasible mass return NaN and False.
+    """
+    mean = np.asarray(mean, float)[:, None]
+    std = np.asarray(std, float)[:, None]
+    a, b = (edges[:, :-1] - mean) / std, (edges[:, 1:] - mean) / std
+    logm = np.where(ok, normal_log_mass(a, b), -np.inf)
+    if log_weight is not None:
+        logm = logm + log_weight
+    found = np.isfinite(logm).any(axis=1)
+    gumbel = rng.gumbel(size=logm.shape)
+    pick = np.argmax(np.where(np.isfinite(logm), logm + gumbel, -np.inf), axis=1)[:, None]
+    lo = np.take_along_axis(a, pick, 1)[:, 0]
+    hi = np.take_along_axis(b, pick, 1)[:, 0]
+    flip = (lo + hi) > 0
+    lo_f, hi_f = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
+    lp_lo, lp_hi = log_ndtr(lo_f), log_ndtr(hi_f)
+    u = rng.random(len(lo))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.exp(lp_lo - lp_hi)
+        x = ndtri_exp(lp_hi + np.log(ratio + u * (1.0 - ratio)))
+    x = np.clip(np.where(np.isfinite(x), x, 0.5 * (lo_f + hi_f)), lo_f, hi_f)
+    x = np.where(flip, -x, x)
+    return np.where(found, mean[:, 0] + std[:, 0] * x, np.nan), found
