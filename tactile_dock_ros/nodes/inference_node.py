@@ -92,6 +92,11 @@ class InferenceNode(Node):
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed, no samples published: {err}")
             return
+        if len(posterior.vertices) < 2:  # the planner's moment fit needs two
+            self.get_logger().error(
+                f"only {len(posterior.vertices)} posterior samples; nothing published"
+            )
+            return
         self.samples_pub.publish(
             convert.samples_to_msg(
                 posterior.vertices,
