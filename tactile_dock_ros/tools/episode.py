@@ -214,6 +214,6 @@ def plot(record: EpisodeRecord, path: Path) -> None:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"episode: {record.state} after {len(record.plans)} cycles")
-    ax.legend(loc="upper right")
+    ax.legend(loc="best")
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
