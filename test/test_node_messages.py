@@ -153,3 +153,48 @@ def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
             executor, lambda: statuses and statuses[-1].message.startswith("ABORTED"), 10.0
         )
     assert "posterior samples" in statuses[-1].message
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
+    reason="tactile_dock_ros.core.planner is not in this tree yet",
+)
+def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from std_srvs.srv import Trigger
+    from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
+
+    from tactile_dock_ros.core import problems
+    from tactile_dock_ros.core.history import History
+
+    spec = launch_nodes("mock")["planner"]
+    statuses, plans = [], []
+    with node_with_driver(spec, tmp_path) as (_node, driver, executor):
+        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
+        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
+        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        start = driver.create_client(Trigger, "start_episode")
+        publishers = (prior, history, samples, pose)
+        assert spin_until(
+            executor,
+            lambda: (
+                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
+            ),
+            10.0,
+        )
+        future = start.call_async(Trigger.Request())
+        assert spin_until(executor, future.done, 10.0) and future.result().success
+        shape = problems.get("sloper").prior
+        stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
+        prior.publish(convert.shape_to_msg(shape, stamp))
+        history.publish(convert.history_to_msg(History(), stamp))
+        pose.publish(_pose(0.0, 0.6, 0.45))
+        empty = np.zeros((0, shape.n_vertices, 2))
+        samples.publish(convert.samples_to_msg(empty, stamp, "hmc", 0.0, 0))
+        assert spin_until(
+            executor, lambda: statuses and statuses[-1].message.startswith("GAVE_UP"), 10.0
+        )
+    assert "no shape consistent" in statuses[-1].message and not plans

@@ -202,7 +202,11 @@ def samples_to_msg(
 
 
 def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
-    """ShapeSamples -> (N, n, 2) vertices; sizes must agree and N, n must be positive."""
+    """ShapeSamples -> (N, n, 2) vertices; sizes must agree and N, n must be positive.
+
+    An empty set (num_samples = 0, no samples) is how inference says that no shape is consistent
+    with the history; callers check ``msg.num_samples == 0`` before converting.
+    """
     n, count = int(msg.num_vertices), int(msg.num_samples)
     if n < 2 or count < 1:
         raise MessageError(f"need num_vertices >= 2 and num_samples >= 1, got {n}, {count}")

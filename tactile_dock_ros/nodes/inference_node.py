@@ -89,12 +89,16 @@ class InferenceNode(Node):
             posterior = sample_posterior(
                 self.prior, self.history, self.p.num_samples, self.rng, method=self.p.method
             )
+            vertices = posterior.vertices
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
-            self.get_logger().error(f"posterior sampling failed, no samples published: {err}")
-            return
-        if len(posterior.vertices) < 2:  # the planner's moment fit needs two
-            self.get_logger().error(
-                f"only {len(posterior.vertices)} posterior samples; nothing published"
+            self.get_logger().error(f"posterior sampling failed: {err}")
+            vertices = np.zeros((0, self.prior.n_vertices, 2))
+        if len(vertices) < 2:  # the planner needs two (moment fit); tell it there are none
+            self.get_logger().error(f"{len(vertices)} posterior samples: publishing an empty set")
+            self.samples_pub.publish(
+                convert.samples_to_msg(
+                    vertices[:0], header(self, self.frame_id), self.p.method, 0.0, len(self.history)
+                )
             )
             return
         self.samples_pub.publish(

@@ -97,7 +97,8 @@ class PlannerNode(Node):
         self.maybe_plan()
 
     def on_samples(self, msg: ShapeSamples) -> None:
-        self.samples = (msg, convert.samples_from_msg(msg))
+        empty = msg.num_samples == 0 and len(msg.samples) == 0  # inference found no shape
+        self.samples = (msg, None if empty else convert.samples_from_msg(msg))
         self.maybe_plan()
 
     def on_start(self, request, response):
@@ -169,6 +170,13 @@ class PlannerNode(Node):
         if not self.ready():
             return
         msg, vertices = self.samples
+        if vertices is None:
+            self.get_logger().info(
+                f"episode {self.episode} cycle {len(self.cycles) + 1}: P_dock=0 decision=GIVE_UP "
+                "outcome=- (no shape is consistent with the contact history)"
+            )
+            self.finish(GAVE_UP, "inference found no shape consistent with the contact history")
+            return
         with Stopwatch() as watch:
             try:
                 result = self.plan(vertices)
