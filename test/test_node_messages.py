@@ -31,7 +31,9 @@ def _pose(x, y, z):
 def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     spec = launch_nodes("mock")["executor"]
     reports, commands = [], []
-    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+    with node_with_driver(spec, tmp_path, ["-p", "executor:connect_timeout:=1.0"]) as (
+        node, driver, executor,
+    ):  # fmt: skip
         plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
         poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
         wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
@@ -54,16 +56,34 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
         assert first.plan_id == 2 and first.outcome == ExecutionReport.ABORTED
         assert "no tool pose" in first.detail
 
-        # With a pose but no F/T data the run aborts with a zero command.
+        # With a pose but no F/T data the plan waits for it, then aborts with a zero command.
         assert spin_until(executor, lambda: node.tool is not None or poses.publish(
             _pose(0.0, 0.6, 0.3)), 10.0)  # fmt: skip
         plans.publish(_plan_msg(3, [[0.0, 0.3], [0.0, 0.1]]))
         assert spin_until(executor, lambda: len(reports) == 2, 10.0)
-    second = convert.report_from_msg(reports[1])
-    assert second.plan_id == 3 and second.outcome == ExecutionReport.ABORTED
-    assert "sensor timeout" in second.detail
-    last = commands[-1].twist.linear
-    assert (last.x, last.y, last.z) == (0.0, 0.0, 0.0)
+        second = convert.report_from_msg(reports[1])
+        assert second.plan_id == 3 and second.outcome == ExecutionReport.ABORTED
+        assert "no wrench" in second.detail
+        assert spin_until(executor, lambda: _zero(commands[-1]), 5.0)  # the arm is stopped
+
+        # Sensors that stop while a plan runs: the arm is stopped, the report says why.
+        def feed():
+            poses.publish(_pose(0.0, 0.6, 0.3))
+            wrenches.publish(WrenchStamped())
+            return node.run is not None and node.filter.ready and not _zero(commands[-1])
+
+        plans.publish(_plan_msg(4, [[0.0, 0.3], [0.0, 0.1]]))
+        assert spin_until(executor, feed, 10.0)
+        assert spin_until(executor, lambda: len(reports) == 3, 10.0)  # no more sensor data
+        assert spin_until(executor, lambda: _zero(commands[-1]), 5.0)
+    third = convert.report_from_msg(reports[2])
+    assert third.plan_id == 4 and third.outcome == ExecutionReport.ABORTED
+    assert "sensor timeout" in third.detail
+
+
+def _zero(twist: TwistStamped) -> bool:
+    v = twist.twist.linear
+    return (v.x, v.y, v.z) == (0.0, 0.0, 0.0)
 
 
 @pytest.mark.skipif(

@@ -25,6 +25,14 @@ PARAMS = [
     Param("max_speed", 0.1, "speed limit of any command", "m/s", 1e-4, 1.0),
     Param("max_force", 40.0, "contact force limit: abort above it", "N", 0.1, 500.0),
     Param("sensor_timeout", 0.5, "abort when pose or wrench is older than this", "s", 0.01, 10.0),
+    Param(
+        "connect_timeout",
+        10.0,
+        "a plan waits this long for the first pose and wrench",
+        "s",
+        0.01,
+        600.0,
+    ),
     Param("workspace_min", [-1.0, -1.0], "workspace box lower corner (plane x, y)", "m", length=2),
     Param("workspace_max", [1.0, 1.0], "workspace box upper corner (plane x, y)", "m", length=2),
     Param("contact_resolution", 0.01, "length of reported contact segments", "m", 1e-4, 0.1),
@@ -107,15 +115,23 @@ class ExecutorNode(Node):
         )
 
     def start_pending(self) -> None:
-        """Start the received plan once the tool pose is known (waits up to sensor_timeout)."""
+        """Start the received plan once pose and wrench flow: fresh (within sensor_timeout) if
+        they ever arrived, else waiting up to connect_timeout for the first ones (discovery)."""
         plan, received = self.pending
-        if self.tool is not None:
+        now = self.now()
+        stamps = (self.pose_time, self.wrench_time)
+        if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):
             self.pending = None
             self.filter.reset()
-            self.run = GuardedRun(plan, self.tool, self.limits, self.settings, self.now())
-        elif self.now() - received > self.limits.sensor_timeout:
+            self.run = GuardedRun(plan, self.tool, self.limits, self.settings, now)
+            return
+        never = any(s is None for s in stamps)
+        if now - received > (self.p.connect_timeout if never else self.limits.sensor_timeout):
             self.pending = None
-            self.report(plan.plan_id, Outcome.ABORTED, "sensor timeout: no tool pose received")
+            missing = [n for n, s in zip(("tool pose", "wrench"), stamps, strict=True) if s is None]
+            why = f"no {' or '.join(missing)} received" if missing else "sensor data too old"
+            self.command(np.zeros(2))
+            self.report(plan.plan_id, Outcome.ABORTED, f"sensor timeout: {why}")
 
     def on_tick(self) -> None:
         if self.pending is not None:
