@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
 }
 
 
