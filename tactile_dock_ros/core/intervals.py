@@ -25,7 +25,10 @@ _IMAG_TOL = 1e-6
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form."""
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.abs(c))
+    scale = np.where(scale > 0, scale, 1.0)
+    a, b, c = a / scale, b / scale, c / scale
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         disc = b * b - 4 * a * c
         q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
         r1 = np.where(a != 0, q / a, -c / b)

@@ -194,6 +194,50 @@ def mh_step(
     return np.where(accept[:, None], proposal, z), accept
 
 
+class ChainRunner:
+    """Advances a batch of chains with one MCMC method on any constraint system."""
+
+    def __init__(
+        self,
+        system,
+        method: str,
+        rng: np.random.Generator,
+        hmc_duration: float = np.pi / 2,
+        mh_scale: float | None = None,
+    ):
+        if method not in ("hmc", "gibbs", "mh"):
+            raise ValueError(f"unknown MCMC method {method!r}")
+        self.system, self.method, self.rng = system, method, rng
+        self.hmc_duration = hmc_duration
+        self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
+        self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
+
+    def step(self, z: np.ndarray, adapt: bool = False) -> np.ndarray:
+        if self.method == "hmc":
+            z, moved, bounces = hmc_step(self.system, z, self.rng, self.hmc_duration)
+            self.stats["bounces"] += bounces
+            self.stats["accepted"] += int(moved.sum())
+        elif self.method == "gibbs":
+            z = gibbs_sweep(self.system, z, self.rng)
+            self.stats["accepted"] += len(z)
+        else:
+            z, accept = mh_step(self.system, z, self.rng, self.scale)
+            self.stats["accepted"] += int(accept.sum())
+            if adapt:  # Robbins-Monro towards 25 % acceptance; burn-in only
+                self.scale *= np.exp(0.5 * (accept.mean() - 0.25))
+        self.stats["proposed"] += len(z)
+        return z
+
+    def run(self, z: np.ndarray, steps: int, thin: int = 1, adapt: bool = False) -> np.ndarray:
+        """States after each of ``steps`` kept steps (``thin`` moves each): (C, steps, m)."""
+        out = np.empty((len(z), steps, z.shape[1]))
+        for i in range(steps):
+            for _ in range(thin):
+                z = self.step(z, adapt)
+            out[:, i] = z
+        return out
+
+
 def random_descent(
     system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -419,39 +463,15 @@ def sample_posterior(
     per_chain = -(-n_samples // chains)
     burn_in = {"hmc": 3, "gibbs": 5, "mh": 200}[method] if burn_in is None else burn_in
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
-    scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(shape.n_basis)
-    stats = {"bounces": 0, "accepted": 0, "proposed": 0}
-
-    def step(z, adapt=False):
-        nonlocal scale
-        if method == "hmc":
-            z, moved, bounces = hmc_step(system, z, rng, hmc_duration)
-            stats["bounces"] += bounces
-            stats["accepted"] += int(moved.sum())
-        elif method == "gibbs":
-            z = gibbs_sweep(system, z, rng)
-            stats["accepted"] += len(z)
-        else:
-            z, accept = mh_step(system, z, rng, scale)
-            stats["accepted"] += int(accept.sum())
-            if adapt:  # Robbins-Monro towards 25 % acceptance, burn-in only
-                scale *= np.exp(0.5 * (accept.mean() - 0.25))
-        stats["proposed"] += len(z)
-        return z
-
-    for _ in range(burn_in):
-        z = step(z, adapt=True)
+    runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
+    z = runner.run(z, burn_in, adapt=True)[:, -1] if burn_in else z
     chain_draws = [[] for _ in range(chains)]
     steps = 0
     while min(len(c) for c in chain_draws) < per_chain and steps < max_steps:
         need = per_chain - min(len(c) for c in chain_draws)
-        block = []
-        for _ in range(min(need, max_steps - steps)):
-            for _ in range(thin):
-                z = step(z)
-            steps += 1
-            block.append(z)
-        block = np.stack(block, axis=1)  # (C, B, m)
+        count = min(need, max_steps - steps)
+        block = runner.run(z, count, thin=thin)  # (C, B, m)
+        z, steps = block[:, -1], steps + count
         ok = _consistent_rows(shape, sub, block.reshape(-1, shape.n_basis))
         ok = ok.reshape(chains, -1)
         for c in range(chains):  # C is small (a handful of chains)
@@ -466,7 +486,7 @@ def sample_posterior(
     else:
         ess = float(len(z))
     info.update(
-        stats,
+        runner.stats,
         steps=steps,
         burn_in=burn_in,
         pairs=system.n_pairs,
@@ -474,5 +494,5 @@ def sample_posterior(
         verified_fraction=sum(len(c) for c in chain_draws) / max(steps * chains, 1),
     )
     if method == "mh":
-        info["mh_scale"] = float(scale)
+        info["mh_scale"] = float(runner.scale)
     return PosteriorSamples(z, vertices, method, ess, time.perf_counter() - start, dropped, info)
