@@ -209,3 +209,8 @@ def test_observation_violations_sign_convention():
     slip = History([[2.0, 0.0]], [[0.5, 0.0]], [Status.SLIP_LEFT])
     assert history_consistent(True, square, stick, 0.5)[0]
     assert not history_consistent(True, square, slip, 0.5)[0]
+
+
+def test_empty_sample_batch():
+    history = History([[0.0, 0.0]], [[1.0, 0.0]], [Status.FREE])
+    assert observation_violations(False, np.zeros((0, 4, 2)), history, 0.5).shape == (0, 1)

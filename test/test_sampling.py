@@ -142,3 +142,16 @@ def test_ess_of_iid_and_ar1_chains():
     got = effective_sample_size(x[..., None])[0]
     assert 0.7 * expected < got < 1.3 * expected
     assert effective_sample_size(np.ones((2, 50, 1)))[0] == 100  # constant: no information
+
+
+def test_benchmark_histories_are_consistent_with_their_truths():
+    from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
+
+    for index, segments in ((1, 3), (2, 3), (3, 5)):
+        problem, history = fig9_problem(index)
+        assert len(history) == segments
+        truth = problem.prior.mean_vertices
+        assert history_consistent(False, truth[None], history, problem.friction)[0]
+    problem, history, truth = three_ledges_after_probes(10, seed=0)
+    assert len(history) == 20 and history.is_contact.sum() == 10
+    assert history_consistent(False, truth[None], history, problem.friction)[0]

@@ -30,7 +30,8 @@ from .intervals import (
 from .shape import GaussianShape
 
 METHODS = ("hmc", "gibbs", "mh", "rejection")
-LINE_HALF_WIDTH = 12.0  # line scans cover the conditional mean +- this many std (mass < 1e-32 lost)
+LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
+SEED_DESCENTS = 4
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 16):
+def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 8):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
     such segment. Chunked: the first exit is usually among the first few roots."""
     c, n_seg = mids.shape
@@ -104,39 +105,44 @@ def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 1
     return hit, first
 
 
-def hmc_step(
+def hmc_chains(
     system,
     z: np.ndarray,
+    n_steps: int,
     rng: np.random.Generator,
     duration: float = np.pi / 2,
-    max_bounces: int = 100,
+    max_bounces: int = 500,
     window: float = 0.15,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """One HMC-with-bouncing move per chain (Alg. 1): returns (z', moved (C,), bounces).
+) -> tuple[np.ndarray, dict]:
+    """``n_steps`` HMC-with-bouncing moves (Alg. 1) of each chain z (C, m): (C, n_steps, m).
 
-    The feasible range is determined over look-ahead windows of at most ``window`` (rad) of the
-    trajectory; a window without an exit just advances the state, so fewer primitives can
-    vanish per solve (an exact reorganisation of Alg. 1's loop, not an approximation).
-
-    Follows z(t) = z0 cos t + p sin t; at the end of the feasible interval containing t = 0 the
-    momentum is reflected about the gradient of the primitive whose root ends it. Decisions: a
-    chain that needs more than ``max_bounces`` bounces, or whose first segment is judged
-    infeasible (numerical grazing), keeps its state for this step (moved = False). Roots closer
-    than 1e-9 to the start are ignored (the one just bounced on).
+    Each move draws p ~ N(0, I) and follows z(t) = z0 cos t + p sin t for t in [0, duration];
+    at the end of the feasible interval containing the current time the momentum is reflected
+    about the gradient of the primitive whose root ends it. Implementation decisions:
+    - the chains run asynchronously in one batch: a chain that finishes a move starts its next
+      one in the same iteration, so no chain waits for the one with the most bounces;
+    - the feasible range is solved over look-ahead windows of at most ``window`` rad (a window
+      without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
+      which far fewer primitives can vanish per solve);
+    - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
+      infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
+    - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
+    Returns the draws and counters (bounces, rejected moves).
     """
     if not 0 < duration < np.pi:
         raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
     z = np.array(z, dtype=float)
+    c, m = z.shape
+    out = np.empty((c, n_steps, m))
+    done = np.zeros(c, dtype=int)
     start = z.copy()
-    c = len(z)
     p = rng.standard_normal(z.shape)
     left = np.full(c, float(duration))
-    running = np.ones(c, dtype=bool)
-    failed = np.zeros(c, dtype=bool)
-    bounces = 0
-    max_iters = 2 * max_bounces + int(np.ceil(duration / window)) + 1
-    for _ in range(max_iters):
-        idx = np.flatnonzero(running)
+    bounced = np.zeros(c, dtype=int)
+    stats = {"bounces": 0, "rejected": 0}
+    per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
+    for _ in range(per_move * n_steps):  # every iteration advances each active chain
+        idx = np.flatnonzero(done < n_steps)
         if idx.size == 0:
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
@@ -160,13 +166,26 @@ def hmc_step(
             unit = grad / np.where(norm > 0, norm, 1.0)
             pb = p_new[bounce]
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
-            bounces += int(bounce.sum())
+            stats["bounces"] += int(bounce.sum())
+        bounced[idx] += bounce
+        failed = stuck | (bounced[idx] > max_bounces)
+        finished = failed | (~hit & (dt >= lc))
         z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
-        running[idx[(~hit & (dt >= lc)) | stuck]] = False
-        failed[idx[stuck]] = True
-    failed |= running
-    z[failed] = start[failed]
-    return z, ~failed, bounces
+        fin = idx[finished]
+        if fin.size:
+            rejected = idx[failed]
+            z[rejected] = start[rejected]
+            stats["rejected"] += int(rejected.size)
+            out[fin, done[fin]] = z[fin]
+            done[fin] += 1
+            start[fin] = z[fin]
+            p[fin] = rng.standard_normal((fin.size, m))
+            left[fin] = duration
+            bounced[fin] = 0
+    unfinished = np.flatnonzero(done < n_steps)
+    for ci in unfinished:  # only if the iteration bound was hit: repeat the last state
+        out[ci, done[ci] :] = start[ci]
+    return out, stats
 
 
 def gibbs_sweep(system, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -213,11 +232,7 @@ class ChainRunner:
         self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
 
     def step(self, z: np.ndarray, adapt: bool = False) -> np.ndarray:
-        if self.method == "hmc":
-            z, moved, bounces = hmc_step(self.system, z, self.rng, self.hmc_duration)
-            self.stats["bounces"] += bounces
-            self.stats["accepted"] += int(moved.sum())
-        elif self.method == "gibbs":
+        if self.method == "gibbs":
             z = gibbs_sweep(self.system, z, self.rng)
             self.stats["accepted"] += len(z)
         else:
@@ -230,6 +245,13 @@ class ChainRunner:
 
     def run(self, z: np.ndarray, steps: int, thin: int = 1, adapt: bool = False) -> np.ndarray:
         """States after each of ``steps`` kept steps (``thin`` moves each): (C, steps, m)."""
+        if self.method == "hmc":
+            draws, stats = hmc_chains(self.system, z, steps * thin, self.rng, self.hmc_duration)
+            self.stats["bounces"] += stats["bounces"]
+            moves = draws.shape[0] * draws.shape[1]
+            self.stats["accepted"] += moves - stats["rejected"]
+            self.stats["proposed"] += moves
+            return draws[:, thin - 1 :: thin]
         out = np.empty((len(z), steps, z.shape[1]))
         for i in range(steps):
             for _ in range(thin):
@@ -239,7 +261,7 @@ class ChainRunner:
 
 
 def random_descent(
-    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60
+    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
 
@@ -248,14 +270,16 @@ def random_descent(
     primitive along it (so local columns, e.g. one vertex's depth noise, fix local contacts
     without disturbing the rest). The line is scanned exactly (interval sets) and the state
     jumps to a point, drawn from the prior along the line, of a segment with the fewest violated
-    observations: the count never increases. Stops when every row is feasible.
+    observations: the count never increases. Stops when ``enough`` rows (default all) are
+    feasible.
     """
     z = np.array(z, dtype=float)
     m = z.shape[1]
     count = _violated_count(system, z)
+    enough = len(z) if enough is None else enough
     for _ in range(max_iters):
         todo = np.flatnonzero(count > 0)
-        if todo.size == 0:
+        if len(z) - todo.size >= enough:
             break
         viol = system.violations(system.values(z[todo])) > 0
         pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
@@ -324,6 +348,10 @@ def _contact_projection(
 def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
     """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
 
+    Decision: at most SEED_DESCENTS descents run per restart, stopping once half of them are
+    feasible; the chains start from those seeds drawn with replacement (their independent HMC
+    momenta separate them within the burn-in).
+
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
     Returns (z, system, best_z, best_count) with z None when no restart reached feasibility.
     """
@@ -331,13 +359,12 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
+    tries = min(chains, SEED_DESCENTS)
     for _ in range(restarts):
         system = HistoryConstraints(shape, history, pairs)
-        z0 = _contact_projection(shape, history, shape.sample_z(rng, chains))
-        z, count = random_descent(system, z0, rng, max_iters)
+        z0 = _contact_projection(shape, history, shape.sample_z(rng, tries))
+        z, count = random_descent(system, z0, rng, max_iters, enough=max(1, tries // 2))
         ok = (count == 0) & _consistent_rows(shape, history, z)
-        if ok.all():
-            return z, system, z, 0
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
         missed = free & np.any(full.pair_violations(z[count == 0]) > 0, axis=0)
@@ -387,7 +414,7 @@ def sample_posterior(
     rng: np.random.Generator,
     method: str = "hmc",
     *,
-    chains: int = 8,
+    chains: int = 16,
     burn_in: int | None = None,
     thin: int = 1,
     prune_threshold: float = 1e-4,

@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
 }
 
 
