@@ -147,11 +147,20 @@ def test_ess_of_iid_and_ar1_chains():
 def test_benchmark_histories_are_consistent_with_their_truths():
     from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
 
+    rates = []
     for index, segments in ((1, 3), (2, 3), (3, 5)):
         problem, history = fig9_problem(index)
         assert len(history) == segments
-        truth = problem.prior.mean_vertices
-        assert history_consistent(False, truth[None], history, problem.friction)[0]
+        out = sample_posterior(
+            problem.prior,
+            history,
+            20000,
+            np.random.default_rng(index),
+            "rejection",
+            max_draws=50000,
+        )
+        rates.append(out.info["acceptance"])
+    assert rates[0] > rates[1] > rates[2] > 0  # increasingly restrictive, none empty
     problem, history, truth = three_ledges_after_probes(10, seed=0)
     assert len(history) == 20 and history.is_contact.sum() == 10
     assert history_consistent(False, truth[None], history, problem.friction)[0]
