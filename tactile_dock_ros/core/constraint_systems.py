@@ -33,7 +33,6 @@ class HistoryConstraints:
         self.n_pairs = len(pairs)
         self._rows = rows
         self._basis_t = np.ascontiguousarray(shape.basis.T)  # (m, 2n)
-        self._basis_rows = shape.basis[rows]  # (P, 4, m)
         self._mean_y = shape.mean[rows]  # (P, 4)
         self._sign, self._lin, self._const = sign[obs], lin[obs], const[obs]
         self._active = active[obs]
@@ -59,6 +58,10 @@ class HistoryConstraints:
         y = self._y(z) + self._mean_y
         g = self._sign * quad(y)[..., None] + np.einsum("...pj,pkj->...pk", y, self._lin)
         return self._flat(g + self._const)
+
+    def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
+        """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
+        return self._prim_index[pair, slot]
 
     def _slots(self, g: np.ndarray) -> np.ndarray:
         full = np.full((*g.shape[:-1], self.n_pairs, 6), -np.inf)
@@ -152,7 +155,7 @@ class HistoryConstraints:
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
         pair, slot = self.prim_pair[prim], self.prim_slot[prim]
-        rows = self._basis_rows[pair]  # (C, 4, m)
+        rows = self.shape.basis[self._rows[pair]]  # (C, 4, m)
         y = np.einsum("cjm,cm->cj", rows, z) + self._mean_y[pair]
         grad_quad = np.stack([-y[:, 3], y[:, 2], y[:, 1], -y[:, 0]], axis=1)
         grad_y = self._sign[pair, slot][:, None] * grad_quad + self._lin[pair, slot]

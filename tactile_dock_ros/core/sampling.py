@@ -337,7 +337,7 @@ def _contact_projection(
         probe = History(mid[usable], mid[usable] + u[usable], np.ones(usable.sum(), int))
         pairs = np.stack([np.arange(usable.sum()), host[usable]], axis=1)
         system = HistoryConstraints(shape, probe, pairs)
-        prims = system._prim_index[np.arange(len(pairs)), 0]
+        prims = system.primitive_index(np.arange(len(pairs)), 0)
         for _ in range(iters):
             g = system.values(z[c][None])[0, prims]
             jac = system.gradient(np.repeat(z[c][None], len(prims), 0), prims)
@@ -348,9 +348,10 @@ def _contact_projection(
 def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
     """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
 
-    Decision: at most SEED_DESCENTS descents run per restart, stopping once half of them are
-    feasible; the chains start from those seeds drawn with replacement (their independent HMC
-    momenta separate them within the burn-in).
+    Decision: at most SEED_DESCENTS descents run per restart. With that many chains or fewer,
+    every chain gets its own seed; with more, descent stops once half are feasible and the
+    chains share those seeds round-robin (independent HMC momenta separate them within the
+    burn-in; slowly mixing MH / Gibbs should use <= SEED_DESCENTS chains).
 
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
     Returns (z, system, best_z, best_count) with z None when no restart reached feasibility.
@@ -363,7 +364,8 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
     for _ in range(restarts):
         system = HistoryConstraints(shape, history, pairs)
         z0 = _contact_projection(shape, history, shape.sample_z(rng, tries))
-        z, count = random_descent(system, z0, rng, max_iters, enough=max(1, tries // 2))
+        enough = tries if chains <= SEED_DESCENTS else max(1, tries // 2)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
@@ -373,7 +375,7 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
         if ok.any():
             good = z[ok]
             system = HistoryConstraints(shape, history, pairs)
-            return good[rng.integers(len(good), size=chains)], system, good[0], 0
+            return good[np.arange(chains) % len(good)], system, good[0], 0
         full_count = np.sum(
             observation_violations(shape.closed, shape.vertices(z), history, shape.friction) > 0,
             axis=1,

@@ -2,9 +2,9 @@
 HMC on three Sloper problems of increasing restriction and on three_ledges after 10 probes, plus
 our HMC against the PyPI package tmg-hmc on a Brownian bridge constrained to y <= 0.
 
-Every number is a median over --repeats runs with different seeds. Wall times include pruning,
-seeding and verification. ESS is the autocorrelation-based effective sample size, minimum
-over vertex coordinates (independent draws for rejection sampling).
+Every number is a median over --repeats runs with different seeds (chains per method: CHAINS).
+Wall times include pruning, seeding and verification. ESS is the autocorrelation-based
+effective sample size, minimum over vertex coordinates (independent draws for rejection).
 """
 
 from __future__ import annotations
@@ -19,6 +19,10 @@ from tactile_dock_ros.core.constraints import history_consistent
 from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.sampling import METHODS, ChainRunner, sample_posterior
 from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
+
+# HMC decorrelates within a move, so many chains share few seeds; the slowly mixing MH and
+# Gibbs chains each get their own seed (SEED_DESCENTS = 4), or their ESS would be inflated.
+CHAINS = {"hmc": 16, "gibbs": 4, "mh": 4, "rejection": 1}
 
 
 def add_arguments(parser) -> None:
@@ -66,7 +70,13 @@ def _run_problem(name, problem, history, n_samples, args, methods, max_draws) ->
         for rep in range(args.repeats):
             rng = np.random.default_rng(args.seed + 1000 * rep + 17)
             out = sample_posterior(
-                problem.prior, history, n_samples, rng, method, max_draws=max_draws
+                problem.prior,
+                history,
+                n_samples,
+                rng,
+                method,
+                max_draws=max_draws,
+                chains=CHAINS[method],
             )
             assert history_consistent(False, out.vertices, history, problem.friction).all()
             runs.append(
@@ -93,7 +103,8 @@ def brownian_bridge(n: int, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]
     those points; the occlusion prior of Sec. III-A1 before the y <= 0 constraint."""
     s = np.arange(1, n + 1) / (n + 1)
     cov = sigma**2 * (np.minimum.outer(s, s) - np.outer(s, s))
-    return np.linalg.cholesky(cov), s
+    eigval, eigvec = np.linalg.eigh(cov)
+    return (eigvec * np.sqrt(eigval)) @ eigvec.T, s  # symmetric root (tmg-hmc requires it)
 
 
 def _bridge(args) -> dict:
