@@ -10,14 +10,13 @@ from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
 from tactile_dock_ros.core.constraints import prune_pairs
 from tactile_dock_ros.core.intervals import (
-    IntervalSet,
+    ellipse_feasible_set,
     ellipse_roots,
-    line_roots,
+    line_feasible_set,
     normal_log_mass,
     quadratic_roots,
     quartic_roots,
     sample_truncated_normal,
-    segment_edges,
     trig_basis,
     window_can_vanish,
 )
@@ -62,35 +61,26 @@ def shape_system(n_probes=6, seed=1):
     return problem.prior, HistoryConstraints(problem.prior, history, pairs), feasible_z, rng
 
 
-def dense_feasible(system, z_of_t, ts):
-    z = z_of_t(ts)
+def dense_feasible(system, z):
     return np.all(system.violations(system.values(z)) <= 0, axis=-1)
 
 
 def check_against_dense(interval_set, ts, dense):
     """Dense points disagree only within 1e-7 of a reported boundary."""
     got = interval_set.contains(ts)
-    bad = ts[got != dense]
     edges = interval_set.bounds.ravel()
-    for t in bad:
-        assert np.min(np.abs(edges - t)) < 1e-7 if edges.size else False
+    for t in ts[got != dense]:
+        assert edges.size and np.min(np.abs(edges - t)) < 1e-7
 
 
 def test_line_interval_sets_agree_with_dense_evaluation():
     shape, system, feasible_z, rng = shape_system()
-    m = shape.n_basis
     boundaries = 0
     for z0 in feasible_z:
-        z0 = z0[None]
-        d = rng.normal(size=(1, m)) * 0.3
-        lo, hi = np.array([-4.0]), np.array([4.0])
-        roots, _ = line_roots(system.line_coefficients(z0, d), lo, hi)
-        edges, mids = segment_edges(roots, lo, hi)
-        ok = dense_feasible(system, lambda t, z0=z0, d=d: z0 + t[:, None] * d, mids[0])
-        interval_set = IntervalSet.from_segments(edges[0], ok)
+        d = rng.normal(size=shape.n_basis) * 0.3
+        interval_set = line_feasible_set(system, z0, d, -4.0, 4.0)
         ts = np.linspace(-4, 4, 4001)
-        dense = dense_feasible(system, lambda t, z0=z0, d=d: z0 + t[:, None] * d, ts)
-        check_against_dense(interval_set, ts, dense)
+        check_against_dense(interval_set, ts, dense_feasible(system, z0 + ts[:, None] * d))
         assert interval_set.contains(np.zeros(1))[0]  # the line starts feasible
         boundaries += len(interval_set.bounds)
     assert boundaries > len(feasible_z)  # some lines leave and re-enter the feasible set
@@ -98,27 +88,20 @@ def test_line_interval_sets_agree_with_dense_evaluation():
 
 def test_ellipse_interval_sets_agree_with_dense_evaluation():
     shape, system, feasible_z, rng = shape_system()
-    m = shape.n_basis
+    exits = 0
     for z0 in feasible_z:
-        z0 = z0[None]
-        p = rng.normal(size=(1, m))
-        t_max = np.array([np.pi / 2])
-        coef = system.ellipse_coefficients(z0, p)
-        solve = np.ones(coef.shape[:2], dtype=bool)
-        roots, owner = ellipse_roots(coef, solve, system.linear, t_max)
-        assert np.all(owner[np.isfinite(roots)] >= 0)
-        edges, mids = segment_edges(roots, np.zeros(1), t_max)
-
-        def path(t, z0=z0, p=p):
-            return z0 * np.cos(t)[:, None] + p * np.sin(t)[:, None]
-
-        interval_set = IntervalSet.from_segments(edges[0], dense_feasible(system, path, mids[0]))
+        p = rng.normal(size=shape.n_basis)
+        interval_set = ellipse_feasible_set(system, z0, p, np.pi / 2)
         assert interval_set.contains(np.zeros(1))[0]
         ts = np.linspace(0, np.pi / 2, 4001)
-        check_against_dense(interval_set, ts, dense_feasible(system, path, ts))
+        path = z0 * np.cos(ts)[:, None] + p * np.sin(ts)[:, None]
+        check_against_dense(interval_set, ts, dense_feasible(system, path))
+        exits += interval_set.measure < np.pi / 2 - 1e-9
         # the trigonometric coefficients reproduce the primitive values
-        g = np.einsum("sj,kj->sk", trig_basis(ts[::400]), coef[0])
-        assert np.allclose(g, system.values(path(ts[::400])), atol=1e-12)
+        coef = system.ellipse_coefficients(z0[None], p[None])[0]
+        g = np.einsum("sj,kj->sk", trig_basis(ts[::400]), coef)
+        assert np.allclose(g, system.values(path[::400]), atol=1e-12)
+    assert exits > 0
 
 
 def test_window_filter_never_drops_a_root():

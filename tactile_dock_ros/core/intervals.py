@@ -173,6 +173,34 @@ class IntervalSet:
         return float(np.sum(self.bounds[:, 1] - self.bounds[:, 0]))
 
 
+def line_scan(system, z: np.ndarray, d: np.ndarray, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Segments of the lines z + t d, t in [lo, hi] (C rows), for a constraint system (see
+    ``core.constraint_systems``): boundaries (C, S+1) and per-segment observation values
+    (C, S, k) judged at the midpoints."""
+    coef = system.line_coefficients(z, d)
+    roots, _ = line_roots(coef, lo, hi)
+    edges, mids = segment_edges(roots, lo, hi)
+    powers = np.stack([np.ones_like(mids), mids, mids * mids], axis=-1)
+    return edges, system.violations(np.matmul(powers, coef.swapaxes(1, 2)))
+
+
+def line_feasible_set(system, z: np.ndarray, d: np.ndarray, lo: float, hi: float) -> IntervalSet:
+    """{t in [lo, hi] : f_H(z + t d) <= 0} for one line (Gibbs ranges, Sec. IV-E)."""
+    edges, values = line_scan(system, z[None], d[None], np.array([lo]), np.array([hi]))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
+
+
+def ellipse_feasible_set(system, z0: np.ndarray, p: np.ndarray, t_max: float) -> IntervalSet:
+    """{t in [0, t_max] : f_H(z0 cos t + p sin t) <= 0} for one ellipse (HMC ranges, Sec.
+    IV-E), every primitive solved (the sampler's filters skip provably irrelevant ones)."""
+    coef = system.ellipse_coefficients(z0[None], p[None])
+    span = np.array([t_max])
+    roots, _ = ellipse_roots(coef, np.ones(coef.shape[:2], dtype=bool), system.linear, span)
+    edges, mids = segment_edges(roots, np.zeros(1), span)
+    values = system.violations(np.matmul(trig_basis(mids), coef.swapaxes(1, 2)))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
+
+
 def normal_log_mass(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """log P(a <= X <= b) for X ~ N(0, 1), accurate far in either tail (App. A); -inf if b <= a."""
     a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))

@@ -21,7 +21,7 @@ from .ess import effective_sample_size
 from .history import History
 from .intervals import (
     ellipse_roots,
-    line_roots,
+    line_scan,
     sample_truncated_normal,
     segment_edges,
     trig_basis,
@@ -78,11 +78,7 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     dd = np.sum(d * d, axis=1)
     mean, std = -np.sum(z * d, axis=1) / dd, 1.0 / np.sqrt(dd)
     lo, hi = mean - LINE_HALF_WIDTH * std, mean + LINE_HALF_WIDTH * std
-    coef = system.line_coefficients(z, d)
-    roots, _ = line_roots(coef, lo, hi)
-    edges, mids = segment_edges(roots, lo, hi)
-    powers = np.stack([np.ones_like(mids), mids, mids * mids], axis=-1)
-    values = system.violations(np.einsum("csj,ckj->csk", powers, coef))
+    edges, values = line_scan(system, z, d, lo, hi)
     return edges, values, mean, std
 
 
