@@ -43,21 +43,27 @@ class HistoryConstraints:
         self.n_prims = len(self.prim_pair)
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
-        # constants of every primitive along a trajectory
-        self._lin_mean = np.einsum("pkj,pj->pk", self._lin, self._mean_y) + self._const
+        # flat per-primitive coefficients (K,), (K, 4), (K,) and their values at the mean
+        self._psign = self._sign[self.prim_pair, self.prim_slot]
+        self._plin = self._lin[self.prim_pair, self.prim_slot]
+        self._pconst = self._const[self.prim_pair, self.prim_slot]
+        mean_y = self._mean_y[self.prim_pair]
+        self._q_mean = quad(self._mean_y)[self.prim_pair]
+        self._g_mean = self._psign * self._q_mean + np.sum(self._plin * mean_y, -1) + self._pconst
 
     def _y(self, z: np.ndarray) -> np.ndarray:
         """Displacements A z of the pair coordinates, (..., P, 4)."""
         return (z @ self._basis_t)[..., self._rows]
 
-    def _flat(self, per_slot: np.ndarray) -> np.ndarray:
-        return per_slot[..., self.prim_pair, self.prim_slot]
+    def _linear_part(self, y: np.ndarray) -> np.ndarray:
+        """l . y per primitive (..., K) for pair coordinates y (..., P, 4)."""
+        return np.einsum("...kj,kj->...k", y[..., self.prim_pair, :], self._plin)
 
     def values(self, z: np.ndarray) -> np.ndarray:
         """Primitive values (..., K) at states z (..., m)."""
         y = self._y(z) + self._mean_y
-        g = self._sign * quad(y)[..., None] + np.einsum("...pj,pkj->...pk", y, self._lin)
-        return self._flat(g + self._const)
+        q = quad(y)[..., self.prim_pair]
+        return self._psign * q + self._linear_part(y) + self._pconst
 
     def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
         """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
@@ -105,13 +111,15 @@ class HistoryConstraints:
         """(C, K) mask: quadratic primitives (g1, g2) of pairs whose linear primitives cannot
         reach a crossing pattern in the window are not worth solving (their roots never change
         a pair's status). g0: values at the window start; may_vanish: linear ones may vanish."""
-        g = self._slots(g0)
-        vanish = self._slots(may_vanish.astype(float)) > 0
-        enter = np.all((g[..., 2:] <= 0) | vanish[..., 2:], axis=-1)  # -inf slots pass
-        g34, v34 = g[..., 2:4], vanish[..., 2:4]
-        leave = self.structure.free_pair & np.all((g34 >= 0) | v34, axis=-1)
-        needed = (enter | leave)[..., self.prim_pair]
-        return needed | self.linear
+        p, nc = self.n_pairs, len(self._cone)
+        below = (g0 <= 0) | may_vanish
+        above = (g0 >= 0) | may_vanish
+        enter = below[..., 2 * p : 3 * p] & below[..., 3 * p : 4 * p]
+        if nc:  # g5, g6 of the stick / slip pairs
+            cone = below[..., 4 * p : 4 * p + nc] & below[..., 4 * p + nc :]
+            enter[..., self._cone] &= cone
+        leave = self.structure.free_pair & above[..., 2 * p : 3 * p] & above[..., 3 * p : 4 * p]
+        return (enter | leave)[..., self.prim_pair] | self.linear
 
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
@@ -120,37 +128,32 @@ class HistoryConstraints:
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Trig coefficients (C, K, 5) of each primitive along mu + A(z0 cos t + p sin t)."""
         mu, al, be = self._mean_y, self._y(z0), self._y(p)
-        s = self._sign
-        q_mm, q_aa, q_bb = quad(mu)[..., None], quad(al)[..., None], quad(be)[..., None]
-        q_ma, q_mb = bilinear(mu, al)[..., None], bilinear(mu, be)[..., None]
-        q_ab = bilinear(al, be)[..., None]
-        l_a = np.matmul(self._lin, al[..., None])[..., 0]  # (C, P, 6)
-        l_b = np.matmul(self._lin, be[..., None])[..., 0]
-        coef = np.stack(
-            np.broadcast_arrays(
-                s * (q_mm + 0.5 * (q_aa + q_bb)) + self._lin_mean,
-                2 * s * q_ma + l_a,
-                2 * s * q_mb + l_b,
+        s, pp = self._psign, self.prim_pair
+        q_aa, q_bb, q_ab = quad(al)[:, pp], quad(be)[:, pp], bilinear(al, be)[:, pp]
+        q_ma, q_mb = bilinear(mu, al)[:, pp], bilinear(mu, be)[:, pp]
+        return np.stack(
+            [
+                s * 0.5 * (q_aa + q_bb) + self._g_mean,
+                2 * s * q_ma + self._linear_part(al),
+                2 * s * q_mb + self._linear_part(be),
                 0.5 * s * (q_aa - q_bb),
                 s * q_ab,
-            ),
+            ],
             axis=-1,
         )
-        return coef[:, self.prim_pair, self.prim_slot]
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Polynomial coefficients (C, K, 3) of each primitive along mu + A(z0 + t d)."""
         y0, v = self._y(z0) + self._mean_y, self._y(d)
-        s = self._sign
-        coef = np.stack(
+        s, pp = self._psign, self.prim_pair
+        return np.stack(
             [
-                s * quad(y0)[..., None] + np.einsum("cpj,pkj->cpk", y0, self._lin) + self._const,
-                2 * s * bilinear(y0, v)[..., None] + np.einsum("cpj,pkj->cpk", v, self._lin),
-                s * quad(v)[..., None],
+                s * quad(y0)[:, pp] + self._linear_part(y0) + self._pconst,
+                2 * s * bilinear(y0, v)[:, pp] + self._linear_part(v),
+                s * quad(v)[:, pp],
             ],
             axis=-1,
         )
-        return coef[:, self.prim_pair, self.prim_slot]
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""

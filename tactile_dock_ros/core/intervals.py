@@ -65,18 +65,30 @@ def trig_basis(t: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
 
 
-def _sorted_roots(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Keep roots (C, K, r) strictly inside (lo, hi) per row; sort; pad with inf."""
-    c = roots.shape[0]
-    flat = roots.reshape(c, -1)
-    owner = np.broadcast_to(np.arange(roots.shape[1])[:, None], roots.shape[1:]).reshape(-1)
-    inside = (flat > lo[:, None]) & (flat < hi[:, None])
-    flat = np.where(inside, flat, np.inf)
-    width = max(int(inside.sum(axis=1).max(initial=0)), 0)
-    order = np.argsort(flat, axis=1)[:, :width]
-    return np.take_along_axis(flat, order, axis=1), np.where(
-        np.isfinite(np.take_along_axis(flat, order, axis=1)), owner[order], -1
-    )
+def _sorted_roots(
+    row: np.ndarray, roots: np.ndarray, owner: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pad candidate roots into (C, R) rows sorted ascending (inf padding, owner -1).
+
+    row (n,), roots (n, r), owner (n,): candidates of primitive ``owner`` on row ``row``; only
+    those strictly inside (lo[row], hi[row]) are kept. Work is linear in the candidates.
+    """
+    c = len(lo)
+    rows = np.repeat(row, roots.shape[1])
+    times = roots.reshape(-1)
+    owners = np.repeat(owner, roots.shape[1])
+    keep = (times > lo[rows]) & (times < hi[rows])  # NaN fails both
+    rows, times, owners = rows[keep], times[keep], owners[keep]
+    order = np.lexsort((times, rows))
+    rows, times, owners = rows[order], times[order], owners[order]
+    counts = np.bincount(rows, minlength=c)
+    width = int(counts.max(initial=0))
+    slot = np.arange(len(rows)) - (np.cumsum(counts) - counts)[rows]
+    out = np.full((c, width), np.inf)
+    who = np.full((c, width), -1)
+    out[rows, slot] = times
+    who[rows, slot] = owners
+    return out, who
 
 
 def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -108,34 +120,29 @@ def ellipse_roots(
     k3 = k4 = 0); t_max must be < pi.
     """
     t_max = np.asarray(t_max, dtype=float)
-    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
-    c, n_prims = k0.shape
-    roots = np.full((c, n_prims, 4), np.nan)
+    lo = np.full(len(t_max), t_min)
     ci, ki = np.nonzero(solve & linear[None])
-    if ci.size:
-        u = quadratic_roots(k0[ci, ki] - k1[ci, ki], 2 * k2[ci, ki], k0[ci, ki] + k1[ci, ki])
-        roots[ci, ki, :2] = u
+    k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
+    lin = _sorted_roots(ci, 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1)), ki, lo, t_max)
     ci, ki = np.nonzero(solve & ~linear[None])
-    if ci.size:
-        poly = np.stack(
-            [
-                k0[ci, ki] - k1[ci, ki] + k3[ci, ki],
-                2 * k2[ci, ki] - 4 * k4[ci, ki],
-                2 * k0[ci, ki] - 6 * k3[ci, ki],
-                2 * k2[ci, ki] + 4 * k4[ci, ki],
-                k0[ci, ki] + k1[ci, ki] + k3[ci, ki],
-            ],
-            axis=-1,
-        )
-        roots[ci, ki] = quartic_roots(poly)
-    times = 2 * np.arctan(roots)
-    return _sorted_roots(times, np.full(c, t_min), t_max)
+    k0, k1, k2, k3, k4 = (coef[ci, ki, j] for j in range(5))
+    poly = np.stack(
+        [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
+    )
+    roots = quartic_roots(poly) if len(ci) else np.zeros((0, 4))
+    quart = _sorted_roots(ci, 2 * np.arctan(roots), ki, lo, t_max)
+    times = np.concatenate([lin[0], quart[0]], axis=1)
+    order = np.argsort(times, axis=1)
+    owner = np.concatenate([lin[1], quart[1]], axis=1)
+    return np.take_along_axis(times, order, 1), np.take_along_axis(owner, order, 1)
 
 
 def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Parameters in (lo[c], hi[c]) where a primitive q0 + q1 t + q2 t^2 vanishes, sorted (C, R)."""
-    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0])
-    return _sorted_roots(roots, np.asarray(lo, float), np.asarray(hi, float))
+    c, k = coef.shape[:2]
+    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0]).reshape(c * k, 2)
+    row, owner = np.divmod(np.arange(c * k), k)
+    return _sorted_roots(row, roots, owner, np.asarray(lo, float), np.asarray(hi, float))
 
 
 def segment_edges(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
