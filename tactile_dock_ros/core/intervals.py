@@ -125,12 +125,13 @@ def ellipse_roots(
     k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
     lin = _sorted_roots(ci, 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1)), ki, lo, t_max)
     ci, ki = np.nonzero(solve & ~linear[None])
+    if ci.size == 0:
+        return lin
     k0, k1, k2, k3, k4 = (coef[ci, ki, j] for j in range(5))
     poly = np.stack(
         [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
     )
-    roots = quartic_roots(poly) if len(ci) else np.zeros((0, 4))
-    quart = _sorted_roots(ci, 2 * np.arctan(roots), ki, lo, t_max)
+    quart = _sorted_roots(ci, 2 * np.arctan(quartic_roots(poly)), ki, lo, t_max)
     times = np.concatenate([lin[0], quart[0]], axis=1)
     order = np.argsort(times, axis=1)
     owner = np.concatenate([lin[1], quart[1]], axis=1)

@@ -32,6 +32,7 @@ from .shape import GaussianShape
 METHODS = ("hmc", "gibbs", "mh", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 SEED_DESCENTS = 4
+WINDOW_MIN_PRIMITIVES = 200  # HMC solves look-ahead windows only for larger systems
 
 
 @dataclass(frozen=True)
@@ -108,7 +109,7 @@ def hmc_chains(
     rng: np.random.Generator,
     duration: float = np.pi / 2,
     max_bounces: int = 500,
-    window: float = 0.15,
+    window: float | None = None,
 ) -> tuple[np.ndarray, dict]:
     """``n_steps`` HMC-with-bouncing moves (Alg. 1) of each chain z (C, m): (C, n_steps, m).
 
@@ -117,7 +118,9 @@ def hmc_chains(
     about the gradient of the primitive whose root ends it. Implementation decisions:
     - the chains run asynchronously in one batch: a chain that finishes a move starts its next
       one in the same iteration, so no chain waits for the one with the most bounces;
-    - the feasible range is solved over look-ahead windows of at most ``window`` rad (a window
+    - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
+      0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
+      a window
       without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
       which far fewer primitives can vanish per solve);
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
@@ -136,6 +139,8 @@ def hmc_chains(
     left = np.full(c, float(duration))
     bounced = np.zeros(c, dtype=int)
     stats = {"bounces": 0, "rejected": 0}
+    if window is None:
+        window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
     per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
     for _ in range(per_move * n_steps):  # every iteration advances each active chain
         idx = np.flatnonzero(done < n_steps)
