@@ -17,6 +17,11 @@ from .history import History
 from .shape import GaussianShape
 
 
+def _quad_gradient(y: np.ndarray) -> np.ndarray:
+    """Gradient of ``quad`` at y (..., 4)."""
+    return np.stack([-y[..., 3], y[..., 2], y[..., 1], -y[..., 0]], axis=-1)
+
+
 class HistoryConstraints:
     """f_H restricted to (observation, edge) ``pairs`` (eqs. 1-3, 16-17) as a function of z."""
 
@@ -32,7 +37,6 @@ class HistoryConstraints:
         self.n_obs = len(history)
         self.n_pairs = len(pairs)
         self._rows = rows
-        self._basis_t = np.ascontiguousarray(shape.basis.T)  # (m, 2n)
         self._mean_y = shape.mean[rows]  # (P, 4)
         self._sign, self._lin, self._const = sign[obs], lin[obs], const[obs]
         self._active = active[obs]
@@ -43,27 +47,34 @@ class HistoryConstraints:
         self.n_prims = len(self.prim_pair)
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
-        # flat per-primitive coefficients (K,), (K, 4), (K,) and their values at the mean
+        # flat per-primitive coefficients (K,), (K, 4), (K,)
         self._psign = self._sign[self.prim_pair, self.prim_slot]
         self._plin = self._lin[self.prim_pair, self.prim_slot]
         self._pconst = self._const[self.prim_pair, self.prim_slot]
+        # g_k(z) = g_mean + L_k . z + s_k quad(A_k z): only g1 (sign -1) and g2 (sign +1) are
+        # quadratic, and they are the first two slot blocks (pairs 0..P-1 each)
         mean_y = self._mean_y[self.prim_pair]
-        self._q_mean = quad(self._mean_y)[self.prim_pair]
-        self._g_mean = self._psign * self._q_mean + np.sum(self._plin * mean_y, -1) + self._pconst
+        grad_mean = self._psign[:, None] * _quad_gradient(mean_y) + self._plin  # (K, 4)
+        self._g_mean = self._psign * quad(mean_y) + np.sum(self._plin * mean_y, -1) + self._pconst
+        pair_basis = shape.basis[rows]  # (P, 4, m)
+        self._lin_z = np.einsum("kj,kjm->mk", grad_mean, pair_basis[self.prim_pair]).copy()
+        self._pair_basis = np.ascontiguousarray(pair_basis.reshape(-1, self.n_dim).T)  # (m, 4P)
 
     def _y(self, z: np.ndarray) -> np.ndarray:
         """Displacements A z of the pair coordinates, (..., P, 4)."""
-        return (z @ self._basis_t)[..., self._rows]
+        return (z @ self._pair_basis).reshape(*z.shape[:-1], self.n_pairs, 4)
 
-    def _linear_part(self, y: np.ndarray) -> np.ndarray:
-        """l . y per primitive (..., K) for pair coordinates y (..., P, 4)."""
-        return np.einsum("...kj,kj->...k", y[..., self.prim_pair, :], self._plin)
+    def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Per-primitive values (..., K): ``lin`` (modified in place) plus the per-pair
+        quadratic term ``q`` (..., P) with sign -1 for g1 and +1 for g2."""
+        p = self.n_pairs
+        lin[..., :p] -= q
+        lin[..., p : 2 * p] += q
+        return lin
 
     def values(self, z: np.ndarray) -> np.ndarray:
         """Primitive values (..., K) at states z (..., m)."""
-        y = self._y(z) + self._mean_y
-        q = quad(y)[..., self.prim_pair]
-        return self._psign * q + self._linear_part(y) + self._pconst
+        return self._with_quadratic(z @ self._lin_z + self._g_mean, quad(self._y(z)))
 
     def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
         """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
@@ -127,42 +138,32 @@ class HistoryConstraints:
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Trig coefficients (C, K, 5) of each primitive along mu + A(z0 cos t + p sin t)."""
-        mu, al, be = self._mean_y, self._y(z0), self._y(p)
-        s, pp = self._psign, self.prim_pair
-        q_aa, q_bb, q_ab = quad(al)[:, pp], quad(be)[:, pp], bilinear(al, be)[:, pp]
-        q_ma, q_mb = bilinear(mu, al)[:, pp], bilinear(mu, be)[:, pp]
-        return np.stack(
-            [
-                s * 0.5 * (q_aa + q_bb) + self._g_mean,
-                2 * s * q_ma + self._linear_part(al),
-                2 * s * q_mb + self._linear_part(be),
-                0.5 * s * (q_aa - q_bb),
-                s * q_ab,
-            ],
-            axis=-1,
-        )
+        c, k = len(z0), self.n_prims
+        al, be = self._y(z0), self._y(p)
+        q_aa, q_bb, q_ab = quad(al), quad(be), bilinear(al, be)
+        out = np.zeros((c, k, 5))
+        out[..., 0] = self._g_mean
+        out[..., 1] = z0 @ self._lin_z
+        out[..., 2] = p @ self._lin_z
+        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, q_ab)):
+            self._with_quadratic(out[..., j], q)
+        return out
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Polynomial coefficients (C, K, 3) of each primitive along mu + A(z0 + t d)."""
-        y0, v = self._y(z0) + self._mean_y, self._y(d)
-        s, pp = self._psign, self.prim_pair
-        return np.stack(
-            [
-                s * quad(y0)[:, pp] + self._linear_part(y0) + self._pconst,
-                2 * s * bilinear(y0, v)[:, pp] + self._linear_part(v),
-                s * quad(v)[:, pp],
-            ],
-            axis=-1,
-        )
+        y0, v = self._y(z0), self._y(d)
+        out = np.zeros((len(z0), self.n_prims, 3))
+        out[..., 0] = self.values(z0)
+        out[..., 1] = self._with_quadratic(d @ self._lin_z, 2 * bilinear(y0, v))
+        self._with_quadratic(out[..., 2], quad(v))
+        return out
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
-        pair, slot = self.prim_pair[prim], self.prim_slot[prim]
-        rows = self.shape.basis[self._rows[pair]]  # (C, 4, m)
-        y = np.einsum("cjm,cm->cj", rows, z) + self._mean_y[pair]
-        grad_quad = np.stack([-y[:, 3], y[:, 2], y[:, 1], -y[:, 0]], axis=1)
-        grad_y = self._sign[pair, slot][:, None] * grad_quad + self._lin[pair, slot]
-        return np.einsum("cj,cjm->cm", grad_y, rows)
+        rows = self.shape.basis[self._rows[self.prim_pair[prim]]]  # (C, 4, m)
+        y = np.einsum("cjm,cm->cj", rows, z)
+        quad_part = np.einsum("cj,cjm->cm", _quad_gradient(y), rows)
+        return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
 
 
 class LinearConstraints:

@@ -91,19 +91,32 @@ def _sorted_roots(
     return out, who
 
 
+# (1 + u^2)^2 g(t) in ascending powers of u = tan(t/2) from (k0, ..., k4): the quartic of
+# ``ellipse_roots``; and power -> Bernstein coefficients on [0, 1]: b_i = sum_l C(i,l)/C(4,l) c_l
+_TRIG_TO_POLY = np.array(
+    [[1, 1, 0, 1, 0], [0, 0, 2, 0, 4], [2, 0, 0, -6, 0], [0, 0, 2, 0, -4], [1, -1, 0, 1, 0]],
+    dtype=float,
+)
+_POWER_TO_BERNSTEIN = np.array(
+    [
+        [1, 0, 0, 0, 0],
+        [1, 1 / 4, 0, 0, 0],
+        [1, 2 / 4, 1 / 6, 0, 0],
+        [1, 3 / 4, 3 / 6, 1 / 4, 0],
+        [1, 1, 1, 1, 1],
+    ]
+)
+
+
 def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-    """(C, K) False where a trigonometric primitive provably keeps its sign on [0, t_max[c]]
-    (t_max < pi): |g(0)| exceeds a bound on |g(t) - g(0)| built from |k_i| and t_max."""
-    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
-    t = np.asarray(t_max, dtype=float)[:, None]
-    sin_max = np.where(t >= np.pi / 2, 1.0, np.sin(t))  # max of |sin| on [0, t]
-    change = (
-        np.abs(k1) * (1 - np.cos(t))
-        + np.abs(k2) * sin_max
-        + np.abs(k3) * 2 * sin_max**2
-        + np.abs(k4) * np.sin(np.minimum(2 * t, np.pi / 2))
-    )
-    return np.abs(k0 + k1 + k3) <= change
+    """(C, K) False where a trigonometric primitive provably keeps a strict sign on
+    [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in u = tan(t/2) on
+    [0, tan(t_max/2)] share one strict sign (the polynomial lies in their convex hull)."""
+    u_max = np.tan(0.5 * np.asarray(t_max, dtype=float))
+    powers = u_max[:, None] ** np.arange(5)  # substitute u = u_max s, s in [0, 1]
+    maps = (_POWER_TO_BERNSTEIN * powers[:, None]) @ _TRIG_TO_POLY  # (C, 5, 5)
+    bern = np.matmul(maps, np.swapaxes(coef, 1, 2))  # (C, 5, K)
+    return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
 def ellipse_roots(
