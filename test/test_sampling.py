@@ -66,12 +66,16 @@ def test_samplers_agree_with_rejection_on_vertex_means(sloper_case):
         "hmc": sample_posterior(problem.prior, history, 800, np.random.default_rng(1), "hmc"),
         "gibbs": sample_posterior(problem.prior, history, 800, np.random.default_rng(2), "gibbs"),
     }
+    runs["hmc_warm"] = sample_posterior(
+        problem.prior, history, 800, np.random.default_rng(3), init_z=runs["gibbs"].z
+    )
+    assert runs["hmc_warm"].info["burn_in"] == 1
     ref = runs["rejection"]
     assert len(ref.z) == 1500
     ref_x = ref.vertices.reshape(len(ref.z), -1)
     prior_x = problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(9), 4000))
     shift = np.abs(ref_x.mean(0) - prior_x.reshape(4000, -1).mean(0)).max()
-    for name in ["hmc", "gibbs"]:
+    for name in ["hmc", "gibbs", "hmc_warm"]:
         x = runs[name].vertices.reshape(len(runs[name].z), -1)
         var = ref_x.var(0) + 1e-12
         tol = 5 * np.sqrt(var / ref.ess + x.var(0) / runs[name].ess)
@@ -164,3 +168,23 @@ def test_benchmark_histories_are_consistent_with_their_truths():
     problem, history, truth = three_ledges_after_probes(10, seed=0)
     assert len(history) == 20 and history.is_contact.sum() == 10
     assert history_consistent(False, truth[None], history, problem.friction)[0]
+
+
+def test_warm_start_from_the_previous_posterior(sloper_case):
+    problem, history = sloper_case
+    shape = problem.prior
+    before = sample_posterior(shape, history.subset([0, 1]), 80, np.random.default_rng(4))
+    consistent = history_consistent(False, before.vertices, history, problem.friction)
+    assert consistent.sum() >= 16  # enough of the old posterior survives the new probe
+    warm = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
+    assert warm.info["warm_seeds"] == 16 and warm.info["burn_in"] == 1
+    assert history_consistent(False, warm.vertices, history, problem.friction).all()
+    again = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
+    assert np.array_equal(warm.z, again.z)
+    # no row consistent: descent starts from them, default burn-in
+    bad = before.z[~consistent][:3]
+    out = sample_posterior(shape, history, 30, np.random.default_rng(6), init_z=bad)
+    assert out.info["warm_seeds"] == 0 and out.info["burn_in"] == 3
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
+    with pytest.raises(ValueError, match="init_z"):
+        sample_posterior(shape, history, 5, np.random.default_rng(0), init_z=before.z * np.nan)

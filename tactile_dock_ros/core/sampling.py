@@ -346,7 +346,16 @@ def _contact_projection(
     return z
 
 
-def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
+def _warm_seeds(shape, history, system, init_z, chains, rng):
+    """Distinct rows of ``init_z`` consistent with the whole history and feasible for the
+    pruned ``system`` (at most ``chains``, in random order), and the rest of ``init_z``."""
+    ok = _consistent_rows(shape, history, init_z)
+    ok[ok] = feasible(system, init_z[ok])
+    good, rest = init_z[ok], init_z[~ok]
+    return good[rng.permutation(len(good))[:chains]], rest[rng.permutation(len(rest))]
+
+
+def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None):
     """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
 
     Decision: at most SEED_DESCENTS descents run per restart. With that many chains or fewer,
@@ -354,17 +363,29 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
     chains share those seeds round-robin (independent HMC momenta separate them within the
     burn-in; slowly mixing MH / Gibbs should use <= SEED_DESCENTS chains).
 
+    Warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
+    history are used as seeds directly (distinct ones first); if none does, the first descent
+    starts from some of them instead of prior draws (they already satisfy most observations).
+
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
-    Returns (z, system, best_z, best_count) with z None when no restart reached feasibility.
+    Returns (z, system, best_z, best_count, distinct warm seeds used) with z None when no restart
+    reached feasibility.
     """
     pairs = prune_pairs(shape, history, threshold)
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
     tries = min(chains, SEED_DESCENTS)
-    for _ in range(restarts):
+    warm = np.zeros((0, shape.n_basis))
+    if init_z is not None and len(init_z):
         system = HistoryConstraints(shape, history, pairs)
-        z0 = _contact_projection(shape, history, shape.sample_z(rng, tries))
+        good, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
+        if len(good):
+            return good[np.arange(chains) % len(good)], system, good[0], 0, len(good)
+    for attempt in range(restarts):
+        system = HistoryConstraints(shape, history, pairs)
+        start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
+        z0 = _contact_projection(shape, history, start)
         enough = tries if chains <= SEED_DESCENTS else max(1, tries // 2)
         z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
@@ -376,14 +397,14 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
         if ok.any():
             good = z[ok]
             system = HistoryConstraints(shape, history, pairs)
-            return good[np.arange(chains) % len(good)], system, good[0], 0
+            return good[np.arange(chains) % len(good)], system, good[0], 0, 0
         full_count = np.sum(
             observation_violations(shape.closed, shape.vertices(z), history, shape.friction) > 0,
             axis=1,
         )
         if full_count.min() < best_count:
             best_count, best_z = full_count.min(), z[np.argmin(full_count)]
-    return None, None, best_z, best_count
+    return None, None, best_z, best_count, 0
 
 
 def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
@@ -427,6 +448,7 @@ def sample_posterior(
     max_draws: int = 2_000_000,
     seed_restarts: int = 8,
     seed_iters: int = 60,
+    init_z: np.ndarray | None = None,
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -440,6 +462,12 @@ def sample_posterior(
     returned sample satisfies every kept observation under the exact geometric test. An empty
     history returns exact prior draws. ``max_steps`` (default 50 n / chains + 1000) bounds the
     MCMC steps per chain; fewer samples are returned if verification keeps failing.
+
+    Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
+    observations, seeds the chains: its rows consistent with the history (the previous
+    posterior filtered by the new observations, i.e. already draws of the new one) are used
+    directly, and when there are at least ``chains`` distinct ones the default burn-in drops
+    to 1 move (HMC, Gibbs) / 50 steps (MH); otherwise descent starts from its rows.
     """
     start = time.perf_counter()
     if method not in METHODS:
@@ -448,6 +476,10 @@ def sample_posterior(
         raise ValueError(f"n_samples must be a non-negative integer, got {n_samples}")
     if chains < 1 or thin < 1:
         raise ValueError("chains and thin must be >= 1")
+    if init_z is not None:
+        init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
+        if not np.all(np.isfinite(init_z)):
+            raise ValueError("init_z must be finite")
     n_samples = int(n_samples)
     dropped = np.zeros(0, dtype=int)
     kept_idx = np.arange(len(history))
@@ -474,8 +506,8 @@ def sample_posterior(
         if len(sub) == 0:
             info["dropped_all"] = True
             return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-        z, system, best_z, _ = _seed(
-            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters
+        z, system, best_z, _, distinct = _seed(
+            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z
         )
         if z is not None:
             break
@@ -491,7 +523,11 @@ def sample_posterior(
         raise RuntimeError("no history-consistent seed found even after dropping observations")
 
     per_chain = -(-n_samples // chains)
-    burn_in = {"hmc": 3, "gibbs": 5, "mh": 200}[method] if burn_in is None else burn_in
+    warm = init_z is not None and distinct >= chains
+    if burn_in is None:
+        burn_in = ({"hmc": 1, "gibbs": 1, "mh": 50} if warm else {"hmc": 3, "gibbs": 5, "mh": 200})[
+            method
+        ]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
     runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
     z = runner.run(z, burn_in, adapt=True)[:, -1] if burn_in else z
@@ -520,6 +556,7 @@ def sample_posterior(
         steps=steps,
         burn_in=burn_in,
         pairs=system.n_pairs,
+        warm_seeds=distinct if init_z is not None else 0,
         pairs_total=len(sub) * shape.n_edges,
         verified_fraction=sum(len(c) for c in chain_draws) / max(steps * chains, 1),
     )
