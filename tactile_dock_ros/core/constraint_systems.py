@@ -119,18 +119,23 @@ class HistoryConstraints:
         return prim, sign
 
     def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        """(C, K) mask: quadratic primitives (g1, g2) of pairs whose linear primitives cannot
-        reach a crossing pattern in the window are not worth solving (their roots never change
-        a pair's status). g0: values at the window start; may_vanish: linear ones may vanish."""
+        """(C, K) mask of the primitives whose roots can matter in a window: those of pairs that
+        can reach a crossing pattern (all primitives <= 0: enters; free pairs also all >= 0:
+        leaves). Any other pair keeps the sign of its value throughout the window (some
+        primitive keeps a strict sign against the pattern), so its roots change nothing.
+        g0: values at the window start; may_vanish: primitives not proven to keep their sign."""
         p, nc = self.n_pairs, len(self._cone)
-        below = (g0 <= 0) | may_vanish
-        above = (g0 >= 0) | may_vanish
-        enter = below[..., 2 * p : 3 * p] & below[..., 3 * p : 4 * p]
-        if nc:  # g5, g6 of the stick / slip pairs
-            cone = below[..., 4 * p : 4 * p + nc] & below[..., 4 * p + nc :]
-            enter[..., self._cone] &= cone
-        leave = self.structure.free_pair & above[..., 2 * p : 3 * p] & above[..., 3 * p : 4 * p]
-        return (enter | leave)[..., self.prim_pair] | self.linear
+
+        def every_slot(mask):
+            out = mask[..., :p] & mask[..., p : 2 * p] & mask[..., 2 * p : 3 * p]
+            out &= mask[..., 3 * p : 4 * p]
+            if nc:  # g5, g6 of the stick / slip pairs
+                out[..., self._cone] &= mask[..., 4 * p : 4 * p + nc] & mask[..., 4 * p + nc :]
+            return out
+
+        enter = every_slot((g0 <= 0) | may_vanish)
+        leave = self.structure.free_pair & every_slot((g0 >= 0) | may_vanish)
+        return (enter | leave)[..., self.prim_pair]
 
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
