@@ -136,19 +136,17 @@ def ellipse_roots(
     lo = np.full(len(t_max), t_min)
     ci, ki = np.nonzero(solve & linear[None])
     k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
-    lin = _sorted_roots(ci, 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1)), ki, lo, t_max)
-    ci, ki = np.nonzero(solve & ~linear[None])
-    if ci.size == 0:
-        return lin
-    k0, k1, k2, k3, k4 = (coef[ci, ki, j] for j in range(5))
+    lin = quadratic_roots(k0 - k1, 2 * k2, k0 + k1)  # (n, 2)
+    cq, kq = np.nonzero(solve & ~linear[None])
+    k0, k1, k2, k3, k4 = (coef[cq, kq, j] for j in range(5))
     poly = np.stack(
         [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
     )
-    quart = _sorted_roots(ci, 2 * np.arctan(quartic_roots(poly)), ki, lo, t_max)
-    times = np.concatenate([lin[0], quart[0]], axis=1)
-    order = np.argsort(times, axis=1)
-    owner = np.concatenate([lin[1], quart[1]], axis=1)
-    return np.take_along_axis(times, order, 1), np.take_along_axis(owner, order, 1)
+    quart = quartic_roots(poly) if cq.size else np.zeros((0, 4))
+    u = np.concatenate([np.pad(lin, ((0, 0), (0, 2)), constant_values=np.nan), quart])
+    return _sorted_roots(
+        np.concatenate([ci, cq]), 2 * np.arctan(u), np.concatenate([ki, kq]), lo, t_max
+    )
 
 
 def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
