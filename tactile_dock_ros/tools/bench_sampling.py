@@ -20,9 +20,10 @@ from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.sampling import METHODS, ChainRunner, sample_posterior
 from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
 
-# HMC decorrelates within a move, so many chains share few seeds; the slowly mixing MH and
-# Gibbs chains each get their own seed (SEED_DESCENTS = 4), or their ESS would be inflated.
-CHAINS = {"hmc": 16, "gibbs": 4, "mh": 4, "rejection": 1}
+# HMC decorrelates within a move, so many chains share few seeds (None: the default, 16 to 64
+# by sample count); the slowly mixing MH and Gibbs chains each get their own seed
+# (SEED_DESCENTS = 4), or their ESS would be inflated.
+CHAINS = {"hmc": None, "gibbs": 4, "mh": 4, "rejection": 1}
 
 
 def add_arguments(parser) -> None:
