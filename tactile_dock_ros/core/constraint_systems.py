@@ -1,0 +1,209 @@
+"""Constraint systems in the whitened coordinates z of ``x = A z + mu`` for the samplers.
+
+A system is a list of K primitives g_k(z) (each linear or quadratic in z) plus a rule that turns
+their values into per-observation values (feasible iff all <= 0). Along the HMC ellipse
+z(t) = z0 cos t + p sin t (eq. 15) every primitive is a trigonometric polynomial
+``k0 + k1 cos t + k2 sin t + k3 cos 2t + k4 sin 2t``; along a line z0 + t d it is a quadratic
+``q0 + q1 t + q2 t^2`` (Sec. IV-E). The samplers only use this interface, so the same HMC runs
+on shape histories and on plain linear inequalities (the Brownian-bridge benchmark).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .constraints import PairStructure, bilinear, observation_primitives, quad
+from .history import History
+from .shape import GaussianShape
+
+
+def _quad_gradient(y: np.ndarray) -> np.ndarray:
+    """Gradient of ``quad`` at y (..., 4)."""
+    return np.stack([-y[..., 3], y[..., 2], y[..., 1], -y[..., 0]], axis=-1)
+
+
+class HistoryConstraints:
+    """f_H restricted to (observation, edge) ``pairs`` (eqs. 1-3, 16-17) as a function of z."""
+
+    def __init__(self, shape: GaussianShape, history: History, pairs: np.ndarray):
+        self.shape = shape
+        self.history = history
+        self.structure = PairStructure(history.status, pairs)
+        pairs = self.structure.pairs
+        sign, lin, const, active = observation_primitives(history, shape.friction)
+        obs = pairs[:, 0]
+        rows = shape.edge_rows()[pairs[:, 1]]  # (P, 4) indices into x
+        self.n_dim = shape.n_basis
+        self.n_obs = len(history)
+        self.n_pairs = len(pairs)
+        self._rows = rows
+        self._mean_y = shape.mean[rows]  # (P, 4)
+        self._sign, self._lin, self._const = sign[obs], lin[obs], const[obs]
+        self._active = active[obs]
+        # slot-major order: slot j's primitives are one contiguous block (fast pair reductions)
+        self.prim_slot, self.prim_pair = np.nonzero(self._active.T)
+        self._cone = np.flatnonzero(self._active[:, 4])  # pairs with g5, g6
+        self.linear = self._sign[self.prim_pair, self.prim_slot] == 0
+        self.n_prims = len(self.prim_pair)
+        self._prim_index = np.full((self.n_pairs, 6), -1)
+        self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
+        # flat per-primitive coefficients (K,), (K, 4), (K,)
+        self._psign = self._sign[self.prim_pair, self.prim_slot]
+        self._plin = self._lin[self.prim_pair, self.prim_slot]
+        self._pconst = self._const[self.prim_pair, self.prim_slot]
+        # g_k(z) = g_mean + L_k . z + s_k quad(A_k z): only g1 (sign -1) and g2 (sign +1) are
+        # quadratic, and they are the first two slot blocks (pairs 0..P-1 each)
+        mean_y = self._mean_y[self.prim_pair]
+        grad_mean = self._psign[:, None] * _quad_gradient(mean_y) + self._plin  # (K, 4)
+        self._g_mean = self._psign * quad(mean_y) + np.sum(self._plin * mean_y, -1) + self._pconst
+        pair_basis = shape.basis[rows]  # (P, 4, m)
+        self._lin_z = np.einsum("kj,kjm->mk", grad_mean, pair_basis[self.prim_pair]).copy()
+        self._pair_basis = np.ascontiguousarray(pair_basis.reshape(-1, self.n_dim).T)  # (m, 4P)
+
+    def _y(self, z: np.ndarray) -> np.ndarray:
+        """Displacements A z of the pair coordinates, (..., P, 4)."""
+        return (z @ self._pair_basis).reshape(*z.shape[:-1], self.n_pairs, 4)
+
+    def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Per-primitive values (..., K): ``lin`` (modified in place) plus the per-pair
+        quadratic term ``q`` (..., P) with sign -1 for g1 and +1 for g2."""
+        p = self.n_pairs
+        lin[..., :p] -= q
+        lin[..., p : 2 * p] += q
+        return lin
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        """Primitive values (..., K) at states z (..., m)."""
+        return self._with_quadratic(z @ self._lin_z + self._g_mean, quad(self._y(z)))
+
+    def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
+        """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
+        return self._prim_index[pair, slot]
+
+    def _slots(self, g: np.ndarray) -> np.ndarray:
+        full = np.full((*g.shape[:-1], self.n_pairs, 6), -np.inf)
+        full[..., self.prim_pair, self.prim_slot] = g
+        return full
+
+    def violations(self, g: np.ndarray) -> np.ndarray:
+        """Per-observation values (..., n_obs) from primitive values (..., K)."""
+        p, nc = self.n_pairs, len(self._cone)
+        g1, g2, g3, g4 = (g[..., j * p : (j + 1) * p] for j in range(4))
+        gmax = np.maximum(np.maximum(g1, g2), np.maximum(g3, g4))
+        gmin = np.minimum(np.minimum(g1, g2), np.minimum(g3, g4))
+        if nc:
+            cone = np.maximum(g[..., 4 * p : 4 * p + nc], g[..., 4 * p + nc :])
+            gmax[..., self._cone] = np.maximum(gmax[..., self._cone], cone)
+        pair = np.where(self.structure.free_pair, np.maximum(-gmax, gmin), gmax)
+        return self.structure.reduce_pairs(pair)
+
+    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each row, the primitive k and sign s with f_obs(z) = s g_k(z) locally (the
+        active branch of the max/min structure); used as a descent direction."""
+        slots = self._slots(self.values(z))  # (C, P, 6)
+        pv = self.structure.pair_values(slots)  # (C, P)
+        in_obs = self.structure.pairs[:, 0][None] == np.asarray(obs)[:, None]
+        free = self.structure.free_obs[obs]
+        # free observations: the worst pair (max); contact: the best pair (min)
+        key = np.where(in_obs, np.where(free[:, None], -pv, pv), np.inf)
+        pair = np.argmin(key, axis=1)
+        rows = np.arange(len(z))
+        g = slots[rows, pair]  # (C, 6)
+        g4 = g[:, :4]
+        enter_branch = -g4.max(axis=1) >= g4.min(axis=1)  # all g <= 0: raise the largest
+        slot = np.where(
+            free, np.where(enter_branch, g4.argmax(axis=1), g4.argmin(axis=1)), g.argmax(axis=1)
+        )
+        sign = np.where(free & enter_branch, -1.0, 1.0)
+        prim = self._prim_index[pair, slot]
+        return prim, sign
+
+    def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
+        """(C, K) mask of the primitives whose roots can matter in a window: those of pairs that
+        can reach a crossing pattern (all primitives <= 0: enters; free pairs also all >= 0:
+        leaves). Any other pair keeps the sign of its value throughout the window (some
+        primitive keeps a strict sign against the pattern), so its roots change nothing.
+        g0: values at the window start; may_vanish: primitives not proven to keep their sign."""
+        p, nc = self.n_pairs, len(self._cone)
+
+        def every_slot(mask):
+            out = mask[..., :p] & mask[..., p : 2 * p] & mask[..., 2 * p : 3 * p]
+            out &= mask[..., 3 * p : 4 * p]
+            if nc:  # g5, g6 of the stick / slip pairs
+                out[..., self._cone] &= mask[..., 4 * p : 4 * p + nc] & mask[..., 4 * p + nc :]
+            return out
+
+        enter = every_slot((g0 <= 0) | may_vanish)
+        leave = self.structure.free_pair & every_slot((g0 >= 0) | may_vanish)
+        return (enter | leave)[..., self.prim_pair]
+
+    def pair_violations(self, z: np.ndarray) -> np.ndarray:
+        """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
+        return self.structure.pair_values(self._slots(self.values(z)))
+
+    def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Trig coefficients (C, K, 5) of each primitive along mu + A(z0 cos t + p sin t)."""
+        c, k = len(z0), self.n_prims
+        al, be = self._y(z0), self._y(p)
+        q_aa, q_bb, q_ab = quad(al), quad(be), bilinear(al, be)
+        out = np.zeros((c, k, 5))
+        out[..., 0] = self._g_mean
+        out[..., 1] = z0 @ self._lin_z
+        out[..., 2] = p @ self._lin_z
+        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, q_ab)):
+            self._with_quadratic(out[..., j], q)
+        return out
+
+    def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Polynomial coefficients (C, K, 3) of each primitive along mu + A(z0 + t d)."""
+        y0, v = self._y(z0), self._y(d)
+        out = np.zeros((len(z0), self.n_prims, 3))
+        out[..., 0] = self.values(z0)
+        out[..., 1] = self._with_quadratic(d @ self._lin_z, 2 * bilinear(y0, v))
+        self._with_quadratic(out[..., 2], quad(v))
+        return out
+
+    def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
+        """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
+        rows = self.shape.basis[self._rows[self.prim_pair[prim]]]  # (C, 4, m)
+        y = np.einsum("cjm,cm->cj", rows, z)
+        quad_part = np.einsum("cj,cjm->cm", _quad_gradient(y), rows)
+        return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
+
+
+class LinearConstraints:
+    """Plain linear inequalities F z + h <= 0, each its own observation."""
+
+    def __init__(self, F: np.ndarray, h: np.ndarray):
+        self.F = np.asarray(F, dtype=float)
+        self.h = np.asarray(h, dtype=float).reshape(-1)
+        if self.F.ndim != 2 or len(self.F) != len(self.h):
+            raise ValueError(f"F (K, m) and h (K,) mismatch: {self.F.shape}, {self.h.shape}")
+        self.n_prims, self.n_dim = self.F.shape
+        self.n_obs = self.n_prims
+        self.linear = np.ones(self.n_prims, dtype=bool)
+
+    def values(self, z: np.ndarray) -> np.ndarray:
+        return z @ self.F.T + self.h
+
+    def violations(self, g: np.ndarray) -> np.ndarray:
+        return g
+
+    def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
+        zeros = np.zeros((len(z0), self.n_prims))
+        h = np.broadcast_to(self.h, zeros.shape)
+        return np.stack([h, z0 @ self.F.T, p @ self.F.T, zeros, zeros], axis=-1)
+
+    def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
+        return np.stack(
+            [z0 @ self.F.T + self.h, d @ self.F.T, np.zeros((len(z0), self.n_prims))], axis=-1
+        )
+
+    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(obs), np.ones(len(obs))
+
+    def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
+        return np.ones_like(may_vanish, dtype=bool)
+
+    def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
+        return self.F[prim]

@@ -1,0 +1,269 @@
+"""Feasible interval sets along lines and ellipses; Gaussians truncated to them (IV-E, App. A).
+
+Roots of every primitive along the trajectory split the parameter range into segments; the
+sign of each primitive is constant inside a segment, so f_H is judged at segment midpoints (the
+paper's advice: away from the roots, immune to root error). Combining primitives by the max /
+min / negation structure of f_H at those midpoints *is* the interval algebra of Sec. IV-E
+(intersection = max, union = min, complement = negation), done for all segments at once.
+
+Arrays carry a leading batch axis C (independent chains). Root arrays are sorted per row and
+padded with +inf; ``owner`` gives the primitive each root belongs to (-1 for padding).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import log_ndtr, ndtri_exp
+
+# Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
+# spurious root only splits a segment in two, which the midpoint test makes harmless.
+_IMAG_TOL = 1e-6
+
+
+def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form."""
+    a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
+    scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.abs(c))
+    scale = np.where(scale > 0, scale, 1.0)
+    a, b, c = a / scale, b / scale, c / scale
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        disc = b * b - 4 * a * c
+        q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
+        r1 = np.where(a != 0, q / a, -c / b)
+        r2 = np.where(a != 0, c / q, np.nan)
+        bad = (disc < 0) & (a != 0)
+        roots = np.stack([np.where(bad, np.nan, r1), np.where(bad, np.nan, r2)], axis=-1)
+    return np.where(np.isfinite(roots), roots, np.nan)
+
+
+def quartic_roots(coef: np.ndarray) -> np.ndarray:
+    """Real roots (..., 4) of polynomials with coefficients (..., 5), highest degree first.
+
+    Batched companion-matrix eigenvalues. A vanishing leading coefficient is replaced by a tiny
+    one, which sends that root to infinity without moving the finite ones.
+    """
+    coef = np.asarray(coef, dtype=float)
+    scale = np.abs(coef).max(axis=-1, keepdims=True)
+    coef = coef / np.where(scale > 0, scale, 1.0)
+    lead = coef[..., :1]
+    tiny = 1e-13
+    lead = np.where(np.abs(lead) < tiny, np.where(lead < 0, -tiny, tiny), lead)
+    monic = coef[..., 1:] / lead
+    comp = np.zeros((*coef.shape[:-1], 4, 4))
+    comp[..., 0, :] = -monic
+    comp[..., 1, 0] = comp[..., 2, 1] = comp[..., 3, 2] = 1.0
+    eig = np.linalg.eigvals(comp)
+    real = np.abs(eig.imag) <= _IMAG_TOL * (1.0 + np.abs(eig.real))
+    return np.where(real & (scale > 0), eig.real, np.nan)
+
+
+def trig_basis(t: np.ndarray) -> np.ndarray:
+    """(..., 5): 1, cos t, sin t, cos 2t, sin 2t."""
+    t = np.asarray(t, dtype=float)
+    return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
+
+
+def _sorted_roots(
+    row: np.ndarray, roots: np.ndarray, owner: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pad candidate roots into (C, R) rows sorted ascending (inf padding, owner -1).
+
+    row (n,), roots (n, r), owner (n,): candidates of primitive ``owner`` on row ``row``; only
+    those strictly inside (lo[row], hi[row]) are kept. Work is linear in the candidates.
+    """
+    c = len(lo)
+    rows = np.repeat(row, roots.shape[1])
+    times = roots.reshape(-1)
+    owners = np.repeat(owner, roots.shape[1])
+    keep = (times > lo[rows]) & (times < hi[rows])  # NaN fails both
+    rows, times, owners = rows[keep], times[keep], owners[keep]
+    order = np.lexsort((times, rows))
+    rows, times, owners = rows[order], times[order], owners[order]
+    counts = np.bincount(rows, minlength=c)
+    width = int(counts.max(initial=0))
+    slot = np.arange(len(rows)) - (np.cumsum(counts) - counts)[rows]
+    out = np.full((c, width), np.inf)
+    who = np.full((c, width), -1)
+    out[rows, slot] = times
+    who[rows, slot] = owners
+    return out, who
+
+
+# (1 + u^2)^2 g(t) in ascending powers of u = tan(t/2) from (k0, ..., k4): the quartic of
+# ``ellipse_roots``; and power -> Bernstein coefficients on [0, 1]: b_i = sum_l C(i,l)/C(4,l) c_l
+_TRIG_TO_POLY = np.array(
+    [[1, 1, 0, 1, 0], [0, 0, 2, 0, 4], [2, 0, 0, -6, 0], [0, 0, 2, 0, -4], [1, -1, 0, 1, 0]],
+    dtype=float,
+)
+_POWER_TO_BERNSTEIN = np.array(
+    [
+        [1, 0, 0, 0, 0],
+        [1, 1 / 4, 0, 0, 0],
+        [1, 2 / 4, 1 / 6, 0, 0],
+        [1, 3 / 4, 3 / 6, 1 / 4, 0],
+        [1, 1, 1, 1, 1],
+    ]
+)
+
+
+def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+    """(C, K) False where a trigonometric primitive provably keeps a strict sign on
+    [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in u = tan(t/2) on
+    [0, tan(t_max/2)] share one strict sign (the polynomial lies in their convex hull)."""
+    u_max = np.tan(0.5 * np.asarray(t_max, dtype=float))
+    powers = u_max[:, None] ** np.arange(5)  # substitute u = u_max s, s in [0, 1]
+    maps = (_POWER_TO_BERNSTEIN * powers[:, None]) @ _TRIG_TO_POLY  # (C, 5, 5)
+    bern = np.matmul(maps, np.swapaxes(coef, 1, 2))  # (C, 5, K)
+    return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
+
+
+def ellipse_roots(
+    coef: np.ndarray,
+    solve: np.ndarray,
+    linear: np.ndarray,
+    t_max: np.ndarray,
+    t_min: float = 1e-9,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Times in (t_min, t_max[c]) where a primitive along the ellipse vanishes, sorted (C, R).
+
+    Only primitives with ``solve`` (C, K) are solved. With u = tan(t/2) a trigonometric
+    polynomial of degree 2 becomes a quartic in u (a quadratic for ``linear`` primitives, whose
+    k3 = k4 = 0); t_max must be < pi.
+    """
+    t_max = np.asarray(t_max, dtype=float)
+    lo = np.full(len(t_max), t_min)
+    ci, ki = np.nonzero(solve & linear[None])
+    k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
+    lin = quadratic_roots(k0 - k1, 2 * k2, k0 + k1)  # (n, 2)
+    cq, kq = np.nonzero(solve & ~linear[None])
+    k0, k1, k2, k3, k4 = (coef[cq, kq, j] for j in range(5))
+    poly = np.stack(
+        [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
+    )
+    quart = quartic_roots(poly) if cq.size else np.zeros((0, 4))
+    u = np.concatenate([np.pad(lin, ((0, 0), (0, 2)), constant_values=np.nan), quart])
+    return _sorted_roots(
+        np.concatenate([ci, cq]), 2 * np.arctan(u), np.concatenate([ki, kq]), lo, t_max
+    )
+
+
+def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters in (lo[c], hi[c]) where a primitive q0 + q1 t + q2 t^2 vanishes, sorted (C, R)."""
+    c, k = coef.shape[:2]
+    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0]).reshape(c * k, 2)
+    row, owner = np.divmod(np.arange(c * k), k)
+    return _sorted_roots(row, roots, owner, np.asarray(lo, float), np.asarray(hi, float))
+
+
+def segment_edges(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Segment boundaries (C, R+2) = [lo, roots..., hi] (padding collapsed onto hi) and the
+    midpoints (C, R+1)."""
+    lo = np.asarray(lo, dtype=float)[:, None]
+    hi = np.asarray(hi, dtype=float)[:, None]
+    edges = np.concatenate([lo, np.minimum(roots, hi), hi], axis=1)
+    return edges, 0.5 * (edges[:, 1:] + edges[:, :-1])
+
+
+@dataclass(frozen=True)
+class IntervalSet:
+    """Disjoint closed intervals, (r, 2) rows [start, end] sorted; r = 0 is the empty set."""
+
+    bounds: np.ndarray
+
+    @classmethod
+    def from_segments(cls, edges: np.ndarray, ok: np.ndarray) -> IntervalSet:
+        """Merge the feasible segments of one row (edges (S+1,), ok (S,)) into intervals."""
+        edges, ok = np.asarray(edges, float), np.asarray(ok, bool)
+        ok = ok & (edges[1:] > edges[:-1])
+        flags = np.concatenate([[False], ok, [False]]).astype(int)
+        change = np.diff(flags)
+        starts, ends = np.flatnonzero(change == 1), np.flatnonzero(change == -1)
+        return cls(np.stack([edges[starts], edges[ends]], axis=1).reshape(-1, 2))
+
+    def contains(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        inside = (t[..., None] >= self.bounds[:, 0]) & (t[..., None] <= self.bounds[:, 1])
+        return inside.any(axis=-1)
+
+    @property
+    def measure(self) -> float:
+        return float(np.sum(self.bounds[:, 1] - self.bounds[:, 0]))
+
+
+def line_scan(system, z: np.ndarray, d: np.ndarray, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Segments of the lines z + t d, t in [lo, hi] (C rows), for a constraint system (see
+    ``core.constraint_systems``): boundaries (C, S+1) and per-segment observation values
+    (C, S, k) judged at the midpoints."""
+    coef = system.line_coefficients(z, d)
+    roots, _ = line_roots(coef, lo, hi)
+    edges, mids = segment_edges(roots, lo, hi)
+    powers = np.stack([np.ones_like(mids), mids, mids * mids], axis=-1)
+    return edges, system.violations(np.matmul(powers, coef.swapaxes(1, 2)))
+
+
+def line_feasible_set(system, z: np.ndarray, d: np.ndarray, lo: float, hi: float) -> IntervalSet:
+    """{t in [lo, hi] : f_H(z + t d) <= 0} for one line (Gibbs ranges, Sec. IV-E)."""
+    edges, values = line_scan(system, z[None], d[None], np.array([lo]), np.array([hi]))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
+
+
+def ellipse_feasible_set(system, z0: np.ndarray, p: np.ndarray, t_max: float) -> IntervalSet:
+    """{t in [0, t_max] : f_H(z0 cos t + p sin t) <= 0} for one ellipse (HMC ranges, Sec.
+    IV-E), every primitive solved (the sampler's filters skip provably irrelevant ones)."""
+    coef = system.ellipse_coefficients(z0[None], p[None])
+    span = np.array([t_max])
+    roots, _ = ellipse_roots(coef, np.ones(coef.shape[:2], dtype=bool), system.linear, span)
+    edges, mids = segment_edges(roots, np.zeros(1), span)
+    values = system.violations(np.matmul(trig_basis(mids), coef.swapaxes(1, 2)))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
+
+
+def normal_log_mass(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """log P(a <= X <= b) for X ~ N(0, 1), accurate far in either tail (App. A); -inf if b <= a."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    flip = (a + b) > 0  # reflect so the interval's centre is <= 0: log_ndtr is then accurate
+    lo, hi = np.where(flip, -b, a), np.where(flip, -a, b)
+    lp_lo, lp_hi = log_ndtr(lo), log_ndtr(hi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = lp_hi + np.log(-np.expm1(lp_lo - lp_hi))
+    return np.where(hi > lo, out, -np.inf)
+
+
+def sample_truncated_normal(
+    edges: np.ndarray,
+    ok: np.ndarray,
+    mean: np.ndarray,
+    std: np.ndarray,
+    rng: np.random.Generator,
+    log_weight: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One draw per row of N(mean, std^2) restricted to the union of ``ok`` segments (App. A).
+
+    edges (C, S+1), ok (C, S). A segment is chosen with probability proportional to its mass
+    (times exp(log_weight) if given), then the draw is an inverse-CDF sample inside it computed
+    in log space, safe in the far tails. Returns (draws (C,), found (C,) bool); rows without
+    any feasible mass return NaN and False.
+    """
+    mean = np.asarray(mean, float)[:, None]
+    std = np.asarray(std, float)[:, None]
+    a, b = (edges[:, :-1] - mean) / std, (edges[:, 1:] - mean) / std
+    logm = np.where(ok, normal_log_mass(a, b), -np.inf)
+    if log_weight is not None:
+        logm = logm + log_weight
+    found = np.isfinite(logm).any(axis=1)
+    gumbel = rng.gumbel(size=logm.shape)
+    pick = np.argmax(np.where(np.isfinite(logm), logm + gumbel, -np.inf), axis=1)[:, None]
+    lo = np.take_along_axis(a, pick, 1)[:, 0]
+    hi = np.take_along_axis(b, pick, 1)[:, 0]
+    flip = (lo + hi) > 0
+    lo_f, hi_f = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
+    lp_lo, lp_hi = log_ndtr(lo_f), log_ndtr(hi_f)
+    u = rng.random(len(lo))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.exp(lp_lo - lp_hi)
+        x = ndtri_exp(lp_hi + np.log(ratio + u * (1.0 - ratio)))
+    x = np.clip(np.where(np.isfinite(x), x, 0.5 * (lo_f + hi_f)), lo_f, hi_f)
+    x = np.where(flip, -x, x)
+    return np.where(found, mean[:, 0] + std[:, 0] * x, np.nan), found

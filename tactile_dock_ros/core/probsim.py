@@ -1,0 +1,393 @@
+"""Closed-form probabilistic simulation of a guarded compliant move (paper Sec. V-A, App. B).
+
+For a Gaussian shape ``x = A z + mu`` this estimates, in O(n) per move, the probability that
+executing a path's loading move stops and sticks at each vertex and edge (eqs. 20-22), the same
+event the deterministic simulator ``core.simulate`` samples for eq. (19). The motion model and its
+edge functionals are those of ``core.simulate``.
+
+Decisions where the paper is vague:
+
+* P(C_e) (App. B): the four exact segment-segment conditions (7-10), written as s >= 0, s <= 1
+  (quadratic in the edge, linearized about its mean) and t >= 0, t <= 1 (linear), are evaluated on
+  the edge's 4-D Gaussian, either as a product of four univariate probabilities (26) or as the
+  product of two bivariate quadrants, pairs (I, III) = (s >= 0, t >= 0) and (II, IV) =
+  (s <= 1, t <= 1) (30), or ("sequential", the default of ``dock_probability``) by Mendell-Elston
+  conditioning on all of them, with the stick / slide conditions of the loading move in the same
+  orthant (P(C_e, K_e) etc.; the pair products assume independence that fails badly when one
+  rotation drives both where an edge lies and how it is tilted: benchmark in docs/probsim.md).
+  With "univariate" / "bivariate", P(C_e, K_e) = P(C_e) P(K_e | C_e) as in the paper.
+* Stick / slide events only involve an edge's direction t = d - c: slide left iff wL.t > 0, slide
+  right iff wR.t > 0, faces the load iff wN.t > 0 (``simulate.friction_functionals``). After a
+  contact, P(K_e | C_e) = P(K_e) / P(wN.t > 0), since a contact implies the edge faces the move.
+* At a vertex v reached by a left slide along r(v) (the paper's P(. | L_r(v)) ~ P(. | SL_r(v))):
+  continue iff SL on l(v) and l(v) faces the load; stick iff l(v) faces the load and does not
+  slide; separate (undocked) otherwise. The three-event probability is chained through SL_l(v):
+  P(SL_l, N_l | SL_r) ~ P(SL_l, SL_r) / P(SL_r) * P(SL_l, N_l) / P(SL_l). Mirror image on the right.
+* Contacts of one move are treated as mutually exclusive first contacts; if the P(C_e) of the
+  loading move sum to more than 1 they are scaled to sum to 1. Moves before the loading move
+  must not touch: p_dock is multiplied by the prefix's no-contact probability, the product over
+  its moves of 1 - sum_e P(C_e).
+* Degenerate covariances (zero or rank-deficient) give the limit values: a constraint with zero
+  variance holds with probability 1 or 0. A zero-length move touches nothing (P(C_e) = 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import log_ndtr, ndtr
+
+from . import bvn
+from .shape import GaussianShape
+from .simulate import cross, edge_index_arrays, friction_functionals, unit
+
+METHODS = ("bivariate", "univariate", "sequential")
+L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
+
+
+@dataclass(frozen=True)
+class DockEstimate:
+    """Eqs. (20-22) solved for one path: p_dock = p_prefix_clear * (sum of the stop terms)."""
+
+    p_dock: float
+    p_stop_vertex: np.ndarray  # (n,) stop-and-stick probability per vertex
+    p_stop_edge: np.ndarray  # (E,) stop-and-stick probability per edge
+    p_prefix_clear: float = 1.0  # probability that the moves before the loading move touch nothing
+
+
+def _standardize(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """h = mean / sd with the zero-variance limits: +inf where mean >= 0, -inf where mean < 0."""
+    sd = np.sqrt(np.maximum(var, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = mean / sd
+    return np.where(sd > 0, h, np.where(mean >= 0, np.inf, -np.inf))
+
+
+def _correlation(cov: np.ndarray, var_a: np.ndarray, var_b: np.ndarray) -> np.ndarray:
+    denom = np.sqrt(np.maximum(var_a, 0.0) * np.maximum(var_b, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = cov / denom
+    return np.clip(np.where(denom > 0, rho, 0.0), -1.0, 1.0)
+
+
+def _both_positive(mean_a, var_a, mean_b, var_b, cov_ab) -> np.ndarray:
+    """P(X > 0, Y > 0) for jointly Gaussian X, Y: a standard quadrant (eq. 29)."""
+    return bvn.quadrant(
+        _standardize(mean_a, var_a), _standardize(mean_b, var_b), _correlation(cov_ab, var_a, var_b)
+    )
+
+
+def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """P(all X_i >= 0) for Gaussians mean (k, ...), cov (k, k, ...): Mendell-Elston conditioning.
+
+    Repeatedly takes the least likely remaining condition, multiplies its probability in, and
+    replaces the Gaussian by its moment-matched truncation (Gaussian regression of the others).
+    Unlike the pair products (26, 30) this stays accurate when the conditions are almost
+    deterministically related, e.g. when a single rotation drives all four conditions of (7-10).
+    Zero-variance conditions count as certain (mean >= 0) or impossible; k steps, k = 4 here.
+    """
+    mu = np.array(mean, dtype=float)
+    sig = np.array(cov, dtype=float)
+    k = len(mu)
+    done = np.zeros(mu.shape, dtype=bool)
+    total = np.ones(mu.shape[1:])
+    for _ in range(k):
+        h = _standardize(mu, np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)))
+        log_p = np.where(done, np.inf, log_ndtr(h))
+        j = np.argmin(log_p, axis=0)[None]  # least likely condition first
+        hj = np.take_along_axis(h, j, 0)[0]
+        total = total * np.exp(np.take_along_axis(log_p, j, 0)[0])
+        var_j = np.take_along_axis(
+            np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)), j, 0
+        )[0]
+        finite = np.isfinite(hj)
+        hj_fin = np.where(finite, hj, 0.0)
+        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_ndtr(hj_fin))
+        mills = np.where(finite, mills, 0.0)
+        sd_j = np.sqrt(np.maximum(var_j, 0.0))
+        shift = sd_j * mills  # truncated mean minus mean
+        shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
+        col = np.take_along_axis(sig, np.broadcast_to(j[None], (k, *j.shape)), 1)[:, 0]  # S_.j
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gain = np.where(var_j > 0, col / var_j, 0.0)
+        mu = mu + gain * shift
+        sig = sig - gain[:, None] * gain[None, :] * shrink
+        np.put_along_axis(done, j, True, 0)
+    return np.clip(total, 0.0, 1.0)
+
+
+def _check_shape(shape: GaussianShape) -> None:
+    if not isinstance(shape, GaussianShape):
+        raise TypeError(f"shape must be a GaussianShape, got {type(shape).__name__}")
+
+
+def _collision_conditions(a, b, means):
+    """Conditions (7-10) for moves a, b (K, 2) against edge means (E, 4), as functions of
+    y = (c, d) that must be >= 0: values at the mean (4, K, E) and gradients (4, K, E, 4).
+
+    (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
+    about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
+    """
+    a = np.asarray(a, dtype=float).reshape(-1, 1, 2)
+    b = np.asarray(b, dtype=float).reshape(-1, 1, 2)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError("move endpoints must be finite")
+    c, d = means[None, :, :2], means[None, :, 2:]
+    move = b - a
+    zero = np.zeros(np.broadcast_shapes(c.shape, a.shape)[:-1])
+    values = np.stack(
+        [
+            cross(d - c, c - a),  # (I) a lies on the outer side of cd
+            cross(d - c, b - c),  # (II) b lies on the inner side
+            cross(move, c - a) + zero,  # (III) c left of ab
+            cross(move, a - d) + zero,  # (IV) d right of ab
+        ]
+    )
+    mx, my = move[..., 0] + zero, move[..., 1] + zero
+    a_x, a_y, b_x, b_y = a[..., 0] + zero, a[..., 1] + zero, b[..., 0] + zero, b[..., 1] + zero
+    c_x, c_y, d_x, d_y = c[..., 0] + zero, c[..., 1] + zero, d[..., 0] + zero, d[..., 1] + zero
+    grads = np.stack(
+        [
+            np.stack([a_y - d_y, d_x - a_x, c_y - a_y, a_x - c_x], axis=-1),
+            np.stack([d_y - b_y, b_x - d_x, b_y - c_y, c_x - b_x], axis=-1),
+            np.stack([-my, mx, zero, zero], axis=-1),
+            np.stack([zero, zero, my, -mx], axis=-1),
+        ]
+    )
+    still = np.linalg.norm(move, axis=-1) == 0.0  # (K, 1)
+    return values, grads, still
+
+
+def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate") -> np.ndarray:
+    """P(ab hits cd) for moves a, b (K, 2) and edges y = (c, d) ~ N(means (E, 4), covs (E, 4, 4)).
+
+    ``method``: "univariate" (26), "bivariate" (30, pairs (I, III) and (II, IV)) or "sequential"
+    (``positive_orthant_sequential`` on all four). Returns (K, E).
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    values, grads, still = _collision_conditions(a, b, means)
+    cov_g = np.einsum("iked,edf,jkef->ijke", grads, covs, grads)  # (4, 4, K, E)
+    var = np.stack([cov_g[i, i] for i in range(4)])
+    if method == "univariate":  # eq. (26)
+        p = np.prod(ndtr(_standardize(values, var)), axis=0)
+    elif method == "bivariate":  # eq. (30)
+        p = _both_positive(values[0], var[0], values[2], var[2], cov_g[0, 2]) * _both_positive(
+            values[1], var[1], values[3], var[3], cov_g[1, 3]
+        )
+    else:
+        p = positive_orthant_sequential(values, cov_g)
+    return np.where(still, 0.0, p)
+
+
+def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
+    """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
+    stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
+    conditioning, so the dependence between where the edge lies and how it is tilted is kept."""
+    means, covs = shape.edge_gaussians()
+    values, grads, still = _collision_conditions(a, b, means)
+    w = friction_functionals(load, shape.friction)
+    rows = {  # the two extra "must be >= 0" functionals of t per event
+        "stick": (-w[L_], -w[R_]),
+        "left": (w[L_], w[N_]),
+        "right": (w[R_], w[N_]),
+    }
+    mean_t = means[:, 2:] - means[:, :2]
+    shape_ke = values.shape[1:]
+    edge_of = np.broadcast_to(np.arange(len(means)), shape_ke)
+    # Prune (Sec. IV-F): a contact no likelier than its least likely condition, here < 1e-12.
+    var = np.einsum("iked,edf,ikef->ike", grads, covs, grads)
+    live = (np.min(ndtr(_standardize(values, var)), axis=0) > 1e-12) & ~still
+    e_live = edge_of[live]
+    v_live, g_live = values[:, live], grads[:, live]  # (4, M), (4, M, 4)
+    out = np.zeros((3, *shape_ke))
+    for slot, pair in enumerate(rows.values()):
+        extra_v = np.stack([mean_t[e_live] @ f for f in pair])
+        extra_g = np.stack(
+            [np.broadcast_to(np.concatenate([-f, f]), g_live.shape[1:]) for f in pair]
+        )
+        g = np.concatenate([g_live, extra_g])
+        cov_g = np.einsum("imd,mdf,jmf->ijm", g, covs[e_live], g)
+        out[slot][live] = positive_orthant_sequential(np.concatenate([v_live, extra_v]), cov_g)
+    return out
+
+
+def collision_probabilities(a, b, shape: GaussianShape, method: str = "bivariate") -> np.ndarray:
+    """(E,) P(C_e): probability that the move a -> b hits edge e (App. B, eq. 26 / 30)."""
+    _check_shape(shape)
+    means, covs = shape.edge_gaussians()
+    return segment_collision_probabilities(a, b, means, covs, method)[0]
+
+
+def _edge_slip_terms(shape: GaussianShape, load) -> dict:
+    """Gaussian moments of the edge functionals wL.t, wR.t, wN.t and of adjacent-edge pairs."""
+    w = friction_functionals(load, shape.friction)  # (3, 2)
+    rows = shape.edge_rows()
+    basis_t = shape.basis[rows[:, 2:]] - shape.basis[rows[:, :2]]  # (E, 2, m)
+    mean_t = shape.mean[rows[:, 2:]] - shape.mean[rows[:, :2]]  # (E, 2)
+    f_basis = np.einsum("kj,ejm->ekm", w, basis_t)  # (E, 3, m): functional k of edge e
+    return {
+        "mean": mean_t @ w.T,  # (E, 3)
+        "cov": f_basis @ np.swapaxes(f_basis, 1, 2),  # (E, 3, 3) within an edge
+        "basis": f_basis,
+    }
+
+
+def _vertex_transitions(shape: GaussianShape, terms: dict):
+    """Per vertex (n,): continue / stick probabilities after arriving by a left or right slide."""
+    n = shape.n_vertices
+    _, left, right = edge_index_arrays(n, shape.closed)
+    inner = (left >= 0) & (right >= 0)
+    el, er = left[inner], right[inner]
+    mean, cov, fb = terms["mean"], terms["cov"], terms["basis"]
+    cross_cov = fb[el] @ np.swapaxes(fb[er], 1, 2)  # (V, 3, 3): functional i of l, j of r
+
+    def pair(e1, i, e2, j, c12):
+        return _both_positive(mean[e1, i], cov[e1, i, i], mean[e2, j], cov[e2, j, j], c12)
+
+    def one(e, i):
+        return ndtr(_standardize(mean[e, i], cov[e, i, i]))
+
+    def ratio(num, den):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(den > 0, np.clip(num / den, 0.0, 1.0), 0.0)
+
+    def arrival(src, dst, row, cov_ds):
+        """Continue / stick on dst after sliding along src (row L_ or R_); cov_ds (V, 3, 3) is
+        Cov(functional i of dst, functional j of src)."""
+        p_src = one(src, row)
+        cont = ratio(pair(dst, row, src, row, cov_ds[:, row, row]), p_src) * ratio(
+            pair(dst, row, dst, N_, cov[dst, row, N_]), one(dst, row)
+        )
+        face = ratio(pair(dst, N_, src, row, cov_ds[:, N_, row]), p_src)
+        return cont, np.maximum(face - cont, 0.0)
+
+    out = {k: np.zeros(n) for k in ("cont_left", "stick_left", "cont_right", "stick_right")}
+    # a left slide arrives along r(v) and goes on to l(v); a right slide the other way round
+    out["cont_left"][inner], out["stick_left"][inner] = arrival(er, el, L_, cross_cov)
+    out["cont_right"][inner], out["stick_right"][inner] = arrival(
+        el, er, R_, np.swapaxes(cross_cov, 1, 2)
+    )
+    return out
+
+
+def _edge_contact_split(terms: dict) -> np.ndarray:
+    """(E, 3) P(K_e | C_e), P(SL_e | C_e), P(SR_e | C_e) from the edge-direction Gaussian."""
+    mean, cov = terms["mean"], terms["cov"]
+    p_face = ndtr(_standardize(mean[:, N_], cov[:, N_, N_]))
+    stick = _both_positive(
+        -mean[:, L_], cov[:, L_, L_], -mean[:, R_], cov[:, R_, R_], cov[:, L_, R_]
+    )
+    sl = _both_positive(mean[:, L_], cov[:, L_, L_], mean[:, N_], cov[:, N_, N_], cov[:, L_, N_])
+    sr = _both_positive(mean[:, R_], cov[:, R_, R_], mean[:, N_], cov[:, N_, N_], cov[:, R_, N_])
+    split = np.stack([stick, sl, sr], axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        split = np.where(p_face[:, None] > 0, split / p_face[:, None], 0.0)
+    total = split.sum(axis=1, keepdims=True)
+    return np.where(total > 1.0, split / np.maximum(total, 1e-300), split)
+
+
+def solve_chain(a: np.ndarray, b: np.ndarray, cyclic: bool) -> np.ndarray:
+    """x_f = a_f + b_f x_{f+1} over the last axis (eqs. 21-22 along the feature sequence).
+
+    Open chains end with x_F = 0; cyclic chains wrap (x_F = x_0) and are solved exactly via
+    x_f = y_f + (prod_{i >= f} b_i) x_0. Recursive doubling: O(F log F) vectorized work,
+    ceil(log2 F) numpy steps and no Python loop over features.
+    """
+    x, prod = a.astype(float).copy(), b.astype(float).copy()
+    size = a.shape[-1]
+    step = 1
+    while step < size:
+        x[..., : size - step] = x[..., : size - step] + prod[..., : size - step] * x[..., step:]
+        prod[..., : size - step] = prod[..., : size - step] * prod[..., step:]
+        step *= 2
+    if cyclic:
+        tail = np.cumprod(b[..., ::-1], axis=-1)[..., ::-1]  # prod_{i >= f} b_i
+        x0 = x[..., :1] / np.maximum(1.0 - tail[..., :1], 1e-300)
+        x = x + tail * x0
+    return x
+
+
+def dock_probabilities(
+    shape: GaussianShape,
+    starts,
+    ends,
+    load,
+    compliant: bool = True,
+    p_clear=None,
+    method: str = "sequential",
+):
+    """Batched eqs. (20-22) for K loading moves ``starts`` -> ``ends`` (K, 2) on one shape.
+
+    Returns p_dock (K,), p_stop_vertex (K, n), p_stop_edge (K, E); ``p_clear`` (K,) multiplies
+    everything (the prefix's no-contact probability; default 1).
+    """
+    _check_shape(shape)
+    unit(load, "load")
+    n, n_edges = shape.n_vertices, shape.n_edges
+    terms = _edge_slip_terms(shape, load)
+    if method == "sequential":
+        events = _contact_events_sequential(starts, ends, shape, load)  # (3, K, E)
+    else:
+        means, covs = shape.edge_gaussians()
+        p_c = segment_collision_probabilities(starts, ends, means, covs, method)  # (K, E)
+        events = p_c[None] * _edge_contact_split(terms).T[:, None, :]
+    total = events.sum(axis=(0, 2))[None, :, None]
+    events = np.where(total > 1.0, events / np.maximum(total, 1e-300), events)
+    p_c = events.sum(axis=0)
+    stop_edge = events[0]
+    stop_vertex = np.zeros((len(p_c), n))
+    if compliant:
+        trans = _vertex_transitions(shape, terms)
+        count = n + n_edges
+        # feature f: vertex i at 2i, edge j at 2j + 1 (left to right along the polyline)
+        a_left, b_left = np.zeros((len(p_c), count)), np.ones((len(p_c), count))
+        a_right, b_right = a_left.copy(), b_left.copy()
+        a_left[:, 1::2], a_right[:, 1::2] = events[1], events[2]
+        b_left[:, 0::2], b_right[:, 0::2] = trans["cont_left"], trans["cont_right"]
+        slide_left = solve_chain(a_left, b_left, shape.closed)  # P(L_F), eq. (21)
+        slide_right = solve_chain(a_right[:, ::-1], b_right[:, ::-1], shape.closed)[:, ::-1]
+        # eq. (20) at vertices: arrive by a left slide from r(v) or a right slide from l(v)
+        from_right = np.roll(slide_left, -1, axis=1)[:, 0::2]
+        from_left = np.roll(slide_right, 1, axis=1)[:, 0::2]
+        if not shape.closed:  # the ends have no neighbour on one side
+            from_right[:, -1] = 0.0
+            from_left[:, 0] = 0.0
+        stop_vertex = from_right * trans["stick_left"] + from_left * trans["stick_right"]
+    clear = np.ones(len(p_c)) if p_clear is None else np.asarray(p_clear, dtype=float)
+    stop_vertex, stop_edge = stop_vertex * clear[:, None], stop_edge * clear[:, None]
+    p_dock = np.clip(stop_vertex.sum(axis=1) + stop_edge.sum(axis=1), 0.0, 1.0)
+    return p_dock, stop_vertex, stop_edge
+
+
+def prefix_clear_probability(shape: GaussianShape, path, method: str = "sequential") -> float:
+    """Probability that every move of ``path`` (L, 2) touches nothing: the product over moves of
+    1 - sum_e P(C_e) (a move's first contacts are exclusive; moves independent)."""
+    path = np.asarray(path, dtype=float)
+    if len(path) < 2:
+        return 1.0
+    means, covs = shape.edge_gaussians()
+    p_c = segment_collision_probabilities(path[:-1], path[1:], means, covs, method)
+    return float(np.prod(np.clip(1.0 - p_c.sum(axis=1), 0.0, 1.0)))
+
+
+def dock_probability(
+    shape: GaussianShape, path, load, compliant: bool = True, method: str = "sequential"
+) -> DockEstimate:
+    """P_dock of ``path`` (L >= 2, 2): its last segment is the loading move pushing along ``load``.
+
+    Eqs. (20-22) with the compliant or non-compliant model, times the probability that the
+    earlier moves touch nothing.
+    """
+    _check_shape(shape)
+    path = np.asarray(path, dtype=float)
+    if path.ndim != 2 or path.shape[1] != 2 or len(path) < 2:
+        raise ValueError(f"path must be (L >= 2, 2) waypoints, got shape {path.shape}")
+    if not np.all(np.isfinite(path)):
+        raise ValueError("path waypoints must be finite")
+    clear = prefix_clear_probability(shape, path[:-1], method)
+    p_dock, vert, edge = dock_probabilities(
+        shape, path[-2:-1], path[-1:], load, compliant, np.array([clear]), method
+    )
+    return DockEstimate(float(p_dock[0]), vert[0], edge[0], clear)

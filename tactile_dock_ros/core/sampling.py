@@ -1,0 +1,578 @@
+"""Posterior shape sampling P(x | H) by rejection, Metropolis-Hastings, Gibbs and HMC with
+constraint bouncing (paper Sec. IV-D..F, Alg. 1, App. A).
+
+Everything runs in the whitened coordinates z (x = A z + mu, z ~ N(0, I) a priori) on a batch of
+C independent chains at once. The MCMC samplers run on the pruned pair set (eqs. 16-17); every
+returned sample is then checked against *all* observation/edge pairs with the exact geometric
+test and dropped if it fails (the chains target the pruned posterior, and filtering its draws
+by the remaining constraints leaves exactly the full posterior).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .constraint_systems import HistoryConstraints
+from .constraints import observation_violations, prune_pairs
+from .ess import effective_sample_size
+from .history import History
+from .intervals import (
+    ellipse_roots,
+    line_scan,
+    sample_truncated_normal,
+    segment_edges,
+    trig_basis,
+    window_can_vanish,
+)
+from .shape import GaussianShape
+
+METHODS = ("hmc", "gibbs", "mh", "rejection")
+LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
+SEED_DESCENTS = 4
+WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
+
+
+@dataclass(frozen=True)
+class PosteriorSamples:
+    """Samples of the posterior shape.
+
+    Attributes:
+        z: (N, m) whitened states; vertices: (N, n, 2) metres.
+        method: sampler name; ess: effective sample size (min over vertex coordinates);
+        seconds: wall time including pruning and seeding.
+        dropped: indices into the given history of observations ignored as inconsistent.
+        info: sampler counters (steps, chains, pairs kept, acceptance, bounces, ...).
+    """
+
+    z: np.ndarray
+    vertices: np.ndarray
+    method: str
+    ess: float
+    seconds: float
+    dropped: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @property
+    def est(self) -> float:
+        """Effective sample time, seconds per effectively independent draw (Sec. IV-F)."""
+        return self.seconds / self.ess if self.ess > 0 else float("inf")
+
+
+def feasible(system, z: np.ndarray) -> np.ndarray:
+    """(C,) whether states z (C, m) satisfy every constraint of ``system``."""
+    return np.all(system.violations(system.values(z)) <= 0, axis=-1)
+
+
+def _violated_count(system, z: np.ndarray) -> np.ndarray:
+    return np.sum(system.violations(system.values(z)) > 0, axis=-1)
+
+
+def _line_scan(system, z: np.ndarray, d: np.ndarray):
+    """Segments of the lines z + t d (C rows) and per-segment observation values (C, S, k).
+
+    Along the line, N(0, I) restricted to it is N(mean, std^2) in t; the scan covers
+    mean +- LINE_HALF_WIDTH std.
+    """
+    dd = np.sum(d * d, axis=1)
+    mean, std = -np.sum(z * d, axis=1) / dd, 1.0 / np.sqrt(dd)
+    lo, hi = mean - LINE_HALF_WIDTH * std, mean + LINE_HALF_WIDTH * std
+    edges, values = line_scan(system, z, d, lo, hi)
+    return edges, values, mean, std
+
+
+def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 8):
+    """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
+    such segment. Chunked: the first exit is usually among the first few roots."""
+    c, n_seg = mids.shape
+    hit = np.zeros(c, dtype=bool)
+    first = np.zeros(c, dtype=int)
+    for lo in range(0, n_seg, chunk):  # bounded by S / chunk
+        rows = np.flatnonzero(~hit)
+        if rows.size == 0:
+            break
+        part = mids[rows, lo : lo + chunk]
+        g = np.matmul(trig_basis(part), coef[rows].swapaxes(1, 2))
+        bad = np.any(system.violations(g) > 0, axis=-1)
+        found = bad.any(axis=1)
+        hit[rows[found]] = True
+        first[rows[found]] = lo + np.argmax(bad[found], axis=1)
+    return hit, first
+
+
+def hmc_chains(
+    system,
+    z: np.ndarray,
+    n_steps: int,
+    rng: np.random.Generator,
+    duration: float = np.pi / 2,
+    max_bounces: int = 500,
+    window: float | None = None,
+) -> tuple[np.ndarray, dict]:
+    """``n_steps`` HMC-with-bouncing moves (Alg. 1) of each chain z (C, m): (C, n_steps, m).
+
+    Each move draws p ~ N(0, I) and follows z(t) = z0 cos t + p sin t for t in [0, duration];
+    at the end of the feasible interval containing the current time the momentum is reflected
+    about the gradient of the primitive whose root ends it. Implementation decisions:
+    - the chains run asynchronously in one batch: a chain that finishes a move starts its next
+      one in the same iteration, so no chain waits for the one with the most bounces;
+    - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
+      0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
+      a window
+      without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
+      which far fewer primitives can vanish per solve);
+    - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
+      infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
+    - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
+    Returns the draws and counters (bounces, rejected moves).
+    """
+    if not 0 < duration < np.pi:
+        raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
+    z = np.array(z, dtype=float)
+    c, m = z.shape
+    out = np.empty((c, n_steps, m))
+    done = np.zeros(c, dtype=int)
+    start = z.copy()
+    p = rng.standard_normal(z.shape)
+    left = np.full(c, float(duration))
+    bounced = np.zeros(c, dtype=int)
+    stats = {"bounces": 0, "rejected": 0}
+    if window is None:
+        window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
+    per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
+    for _ in range(per_move * n_steps):  # every iteration advances each active chain
+        idx = np.flatnonzero(done < n_steps)
+        if idx.size == 0:
+            break
+        zc, pc, lc = z[idx], p[idx], left[idx]
+        span = np.minimum(lc, window)
+        coef = system.ellipse_coefficients(zc, pc)
+        solve = window_can_vanish(coef, span)
+        solve &= system.worth_solving(coef[..., 0] + coef[..., 1] + coef[..., 3], solve)
+        roots, owner = ellipse_roots(coef, solve, system.linear, span)
+        edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
+        hit, first = _first_infeasible(system, coef, mids)
+        stuck = hit & (first == 0)
+        rows = np.arange(len(idx))
+        dt = np.where(hit, edges[rows, first], span)
+        cos, sin = np.cos(dt)[:, None], np.sin(dt)[:, None]
+        z_new, p_new = zc * cos + pc * sin, pc * cos - zc * sin
+        bounce = hit & ~stuck
+        if bounce.any():
+            prim = owner[rows[bounce], first[bounce] - 1]
+            grad = system.gradient(z_new[bounce], prim)
+            norm = np.linalg.norm(grad, axis=1, keepdims=True)
+            unit = grad / np.where(norm > 0, norm, 1.0)
+            pb = p_new[bounce]
+            p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
+            stats["bounces"] += int(bounce.sum())
+        bounced[idx] += bounce
+        failed = stuck | (bounced[idx] > max_bounces)
+        finished = failed | (~hit & (dt >= lc))
+        z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
+        fin = idx[finished]
+        if fin.size:
+            rejected = idx[failed]
+            z[rejected] = start[rejected]
+            stats["rejected"] += int(rejected.size)
+            out[fin, done[fin]] = z[fin]
+            done[fin] += 1
+            start[fin] = z[fin]
+            p[fin] = rng.standard_normal((fin.size, m))
+            left[fin] = duration
+            bounced[fin] = 0
+    unfinished = np.flatnonzero(done < n_steps)
+    for ci in unfinished:  # only if the iteration bound was hit: repeat the last state
+        out[ci, done[ci] :] = start[ci]
+    return out, stats
+
+
+def gibbs_sweep(system, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One Gibbs sweep over every coordinate of z (Sec. IV-D): z_i from N(0, 1) restricted to
+    the feasible interval set along axis i (App. A). A row with no feasible mass keeps z_i."""
+    z = np.array(z, dtype=float)
+    c, m = z.shape
+    for i in range(m):  # sequential by definition of Gibbs sampling
+        d = np.zeros((c, m))
+        d[:, i] = 1.0
+        edges, values, mean, std = _line_scan(system, z, d)
+        t, found = sample_truncated_normal(edges, np.all(values <= 0, axis=-1), mean, std, rng)
+        z[:, i] += np.where(found, t, 0.0)
+    return z
+
+
+def mh_step(
+    system, z: np.ndarray, rng: np.random.Generator, scale: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random-walk Metropolis-Hastings (Sec. IV-D): Gaussian perturbation of std ``scale``,
+    accepted with the prior density ratio if the proposal is feasible."""
+    proposal = z + scale * rng.standard_normal(z.shape)
+    log_ratio = 0.5 * (np.sum(z * z, axis=1) - np.sum(proposal * proposal, axis=1))
+    accept = (np.log(rng.random(len(z))) < log_ratio) & feasible(system, proposal)
+    return np.where(accept[:, None], proposal, z), accept
+
+
+class ChainRunner:
+    """Advances a batch of chains with one MCMC method on any constraint system."""
+
+    def __init__(
+        self,
+        system,
+        method: str,
+        rng: np.random.Generator,
+        hmc_duration: float = np.pi / 2,
+        mh_scale: float | None = None,
+    ):
+        if method not in ("hmc", "gibbs", "mh"):
+            raise ValueError(f"unknown MCMC method {method!r}")
+        self.system, self.method, self.rng = system, method, rng
+        self.hmc_duration = hmc_duration
+        self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
+        self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
+
+    def step(self, z: np.ndarray, adapt: bool = False) -> np.ndarray:
+        if self.method == "gibbs":
+            z = gibbs_sweep(self.system, z, self.rng)
+            self.stats["accepted"] += len(z)
+        else:
+            z, accept = mh_step(self.system, z, self.rng, self.scale)
+            self.stats["accepted"] += int(accept.sum())
+            if adapt:  # Robbins-Monro towards 25 % acceptance; burn-in only
+                self.scale *= np.exp(0.5 * (accept.mean() - 0.25))
+        self.stats["proposed"] += len(z)
+        return z
+
+    def run(self, z: np.ndarray, steps: int, thin: int = 1, adapt: bool = False) -> np.ndarray:
+        """States after each of ``steps`` kept steps (``thin`` moves each): (C, steps, m)."""
+        if self.method == "hmc":
+            draws, stats = hmc_chains(self.system, z, steps * thin, self.rng, self.hmc_duration)
+            self.stats["bounces"] += stats["bounces"]
+            moves = draws.shape[0] * draws.shape[1]
+            self.stats["accepted"] += moves - stats["rejected"]
+            self.stats["proposed"] += moves
+            return draws[:, thin - 1 :: thin]
+        out = np.empty((len(z), steps, z.shape[1]))
+        for i in range(steps):
+            for _ in range(thin):
+                z = self.step(z, adapt)
+            out[:, i] = z
+        return out
+
+
+def random_descent(
+    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
+
+    Decision: each iteration picks a random violated observation and a random coordinate axis
+    of z, with probability proportional to the squared gradient of the observation's active
+    primitive along it (so local columns, e.g. one vertex's depth noise, fix local contacts
+    without disturbing the rest). The line is scanned exactly (interval sets) and the state
+    jumps to a point, drawn from the prior along the line, of a segment with the fewest violated
+    observations: the count never increases. Stops when ``enough`` rows (default all) are
+    feasible.
+    """
+    z = np.array(z, dtype=float)
+    m = z.shape[1]
+    count = _violated_count(system, z)
+    enough = len(z) if enough is None else enough
+    for _ in range(max_iters):
+        todo = np.flatnonzero(count > 0)
+        if len(z) - todo.size >= enough:
+            break
+        viol = system.violations(system.values(z[todo])) > 0
+        pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
+        prim, _ = system.steepest_primitive(z[todo], pick)
+        weight = system.gradient(z[todo], prim) ** 2 + 1e-12 / m
+        cum = np.cumsum(weight, axis=1)
+        axis = np.argmax(cum >= rng.random((todo.size, 1)) * cum[:, -1:], axis=1)
+        d = np.zeros((todo.size, m))
+        d[np.arange(todo.size), axis] = 1.0
+        edges, values, mean, std = _line_scan(system, z[todo], d)
+        seg_count = np.sum(values > 0, axis=-1)
+        best = seg_count == seg_count.min(axis=1, keepdims=True)
+        t, found = sample_truncated_normal(edges, best, mean, std, rng)
+        z[todo] += np.where(found, t, 0.0)[:, None] * d
+        count[todo] = _violated_count(system, z[todo])
+    return z, count
+
+
+def _consistent_rows(shape: GaussianShape, history: History, z: np.ndarray) -> np.ndarray:
+    v = shape.vertices(z)
+    return np.all(observation_violations(shape.closed, v, history, shape.friction) <= 0, axis=1)
+
+
+def _contact_projection(
+    shape: GaussianShape, history: History, z: np.ndarray, iters: int = 3
+) -> np.ndarray:
+    """Move prior draws z (C, m) so that the surface passes through every contact midpoint.
+
+    Decision (the paper seeds descent from plain prior draws, which for thin contact slabs
+    almost never reach the feasible set): each contact midpoint p gets the edge of the current
+    shape its probe line crosses nearest to p, and Gauss-Newton minimum-norm steps solve
+    cross(d - c, p - c) = 0 (g1 of eq. 7 with a = p) for all of them at once.
+    """
+    contact = np.flatnonzero(history.is_contact)
+    if contact.size == 0:
+        return z
+    a, b = history.a[contact], history.b[contact]
+    mid, u = 0.5 * (a + b), b - a
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    z = np.array(z, dtype=float)
+    for c in range(len(z)):  # a handful of chains, each a small least-squares problem
+        v = shape.vertices(z[c])
+        ends = v[shape.edges]  # (E, 2, 2)
+        e = ends[:, 1] - ends[:, 0]
+        rel = ends[None, :, 0] - mid[:, None]  # (k, E, 2)
+        den = u[:, None, 0] * e[None, :, 1] - u[:, None, 1] * e[None, :, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (rel[..., 0] * e[None, :, 1] - rel[..., 1] * e[None, :, 0]) / den
+            lam = (rel[..., 0] * u[:, None, 1] - rel[..., 1] * u[:, None, 0]) / den
+        score = np.where((lam >= 0) & (lam <= 1) & np.isfinite(s), np.abs(s), np.inf)
+        host = np.argmin(score, axis=1)
+        usable = np.isfinite(score[np.arange(len(contact)), host])
+        if not usable.any():
+            continue
+        probe = History(mid[usable], mid[usable] + u[usable], np.ones(usable.sum(), int))
+        pairs = np.stack([np.arange(usable.sum()), host[usable]], axis=1)
+        system = HistoryConstraints(shape, probe, pairs)
+        prims = system.primitive_index(np.arange(len(pairs)), 0)
+        for _ in range(iters):
+            g = system.values(z[c][None])[0, prims]
+            jac = system.gradient(np.repeat(z[c][None], len(prims), 0), prims)
+            z[c] -= np.linalg.lstsq(jac, g, rcond=None)[0]
+    return z
+
+
+def default_chains(method: str, n_samples: int) -> int:
+    """Chains when none are given: 16, and for HMC up to 64 so that each chain still yields
+    >= 16 draws. Decision: HMC's cost is dominated by per-bounce numpy calls over the whole
+    batch, so wider batches (fewer bounce iterations per sample) are cheaper per draw, while
+    each chain pays its own burn-in."""
+    if method == "hmc":
+        return int(np.clip(n_samples // 16, 16, 64))
+    return 16
+
+
+def _warm_seeds(shape, history, system, init_z, chains, rng):
+    """Distinct rows of ``init_z`` consistent with the whole history and feasible for the
+    pruned ``system`` (at most ``chains``, in random order), and the rest of ``init_z``."""
+    ok = _consistent_rows(shape, history, init_z)
+    ok[ok] = feasible(system, init_z[ok])
+    good, rest = init_z[ok], init_z[~ok]
+    return good[rng.permutation(len(good))[:chains]], rest[rng.permutation(len(rest))]
+
+
+def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None):
+    """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
+
+    Decision: at most SEED_DESCENTS descents run per restart. With that many chains or fewer,
+    every chain gets its own seed; with more, descent stops once half are feasible and the
+    chains share those seeds round-robin (independent HMC momenta separate them within the
+    burn-in; slowly mixing MH / Gibbs should use <= SEED_DESCENTS chains).
+
+    Warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
+    history are used as seeds directly (distinct ones first); if none does, the first descent
+    starts from some of them instead of prior draws (they already satisfy most observations).
+
+    Pairs a seed violates outside the pruned set are added to it and the descent repeated.
+    Returns (z, system, best_z, best_count, distinct warm seeds used) with z None when no restart
+    reached feasibility.
+    """
+    pairs = prune_pairs(shape, history, threshold)
+    all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
+    full = HistoryConstraints(shape, history, all_pairs)
+    best_z, best_count = None, np.inf
+    tries = min(chains, SEED_DESCENTS)
+    warm = np.zeros((0, shape.n_basis))
+    if init_z is not None and len(init_z):
+        system = HistoryConstraints(shape, history, pairs)
+        good, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
+        if len(good):
+            return good[np.arange(chains) % len(good)], system, good[0], 0, len(good)
+    for attempt in range(restarts):
+        system = HistoryConstraints(shape, history, pairs)
+        start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
+        z0 = _contact_projection(shape, history, start)
+        enough = tries if chains <= SEED_DESCENTS else max(1, tries // 2)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
+        ok = (count == 0) & _consistent_rows(shape, history, z)
+        # pairs the pruned set missed: add the ones these states violate
+        free = full.structure.free_pair
+        missed = free & np.any(full.pair_violations(z[count == 0]) > 0, axis=0)
+        if missed.any():
+            pairs = np.unique(np.vstack([pairs, all_pairs[missed]]), axis=0)
+        if ok.any():
+            good = z[ok]
+            system = HistoryConstraints(shape, history, pairs)
+            return good[np.arange(chains) % len(good)], system, good[0], 0, 0
+        full_count = np.sum(
+            observation_violations(shape.closed, shape.vertices(z), history, shape.friction) > 0,
+            axis=1,
+        )
+        if full_count.min() < best_count:
+            best_count, best_z = full_count.min(), z[np.argmin(full_count)]
+    return None, None, best_z, best_count, 0
+
+
+def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
+    z = shape.sample_z(rng, n_samples)
+    return PosteriorSamples(
+        z,
+        shape.vertices(z),
+        method,
+        float(n_samples),
+        time.perf_counter() - start,
+        dropped,
+        info,
+    )
+
+
+def _rejection(shape, history, n_samples, rng, max_draws, batch):
+    kept, draws = [], 0
+    while sum(len(k) for k in kept) < n_samples and draws < max_draws:
+        size = min(batch, max_draws - draws)
+        z = shape.sample_z(rng, size)
+        draws += size
+        kept.append(z[_consistent_rows(shape, history, z)])
+    z = np.vstack([np.zeros((0, shape.n_basis)), *kept])[:n_samples]
+    return z, {"draws": draws, "acceptance": (sum(len(k) for k in kept) / max(draws, 1))}
+
+
+def sample_posterior(
+    shape: GaussianShape,
+    history: History,
+    n_samples: int,
+    rng: np.random.Generator,
+    method: str = "hmc",
+    *,
+    chains: int | None = None,
+    burn_in: int | None = None,
+    thin: int = 1,
+    prune_threshold: float = 1e-4,
+    hmc_duration: float = np.pi / 2,
+    mh_scale: float | None = None,
+    max_steps: int | None = None,
+    max_draws: int = 2_000_000,
+    seed_restarts: int = 8,
+    seed_iters: int = 60,
+    init_z: np.ndarray | None = None,
+) -> PosteriorSamples:
+    """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
+
+    Methods: "hmc" (Alg. 1, T = ``hmc_duration``), "gibbs" (one sweep per sample), "mh"
+    (random walk, step adapted during burn-in), "rejection" (i.i.d. prior draws, at most
+    ``max_draws``; may return fewer samples, even none, if the posterior is too unlikely).
+
+    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from seeds
+    found by random descent of f_H. If ``seed_restarts`` descents
+    all fail, the history is taken as inconsistent (sensor error): the observations violated by
+    the best state found are dropped (``dropped``) and sampling continues without them. Every
+    returned sample satisfies every kept observation under the exact geometric test. An empty
+    history returns exact prior draws. ``max_steps`` (default 50 n / chains + 1000) bounds the
+    MCMC steps per chain; fewer samples are returned if verification keeps failing.
+
+    Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
+    observations, seeds the chains: its rows consistent with the history (the previous
+    posterior filtered by the new observations, i.e. already draws of the new one) are used
+    directly, and when there are at least ``chains`` distinct ones the default burn-in drops
+    to 1 move (HMC, Gibbs) / 50 steps (MH); otherwise descent starts from its rows.
+    """
+    start = time.perf_counter()
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
+    if int(n_samples) != n_samples or n_samples < 0:
+        raise ValueError(f"n_samples must be a non-negative integer, got {n_samples}")
+    if chains is None:
+        chains = default_chains(method, n_samples)
+    if chains < 1 or thin < 1:
+        raise ValueError("chains and thin must be >= 1")
+    if init_z is not None:
+        init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
+        if not np.all(np.isfinite(init_z)):
+            raise ValueError("init_z must be finite")
+    n_samples = int(n_samples)
+    dropped = np.zeros(0, dtype=int)
+    kept_idx = np.arange(len(history))
+    info: dict = {"chains": chains if method != "rejection" else 0}
+    if len(history) == 0 or n_samples == 0:
+        return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
+    if method == "rejection":
+        z, stats = _rejection(shape, history, n_samples, rng, max_draws, max(1024, 4 * n_samples))
+        info.update(stats)
+        return PosteriorSamples(
+            z,
+            shape.vertices(z),
+            method,
+            float(len(z)),
+            time.perf_counter() - start,
+            dropped,
+            info,
+        )
+    if shape.n_basis == 0:
+        raise ValueError("MCMC needs at least one basis column; use method='rejection'")
+
+    for _ in range(3):  # bounded: each round drops at least one observation
+        sub = history.subset(kept_idx)
+        if len(sub) == 0:
+            info["dropped_all"] = True
+            return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
+        z, system, best_z, _, distinct = _seed(
+            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z
+        )
+        if z is not None:
+            break
+        violated = (
+            observation_violations(shape.closed, shape.vertices(best_z[None]), sub, shape.friction)[
+                0
+            ]
+            > 0
+        )
+        dropped = np.sort(np.concatenate([dropped, kept_idx[violated]]))
+        kept_idx = kept_idx[~violated]
+    else:
+        raise RuntimeError("no history-consistent seed found even after dropping observations")
+
+    per_chain = -(-n_samples // chains)
+    warm = init_z is not None and distinct >= chains
+    if burn_in is None:
+        burn_in = ({"hmc": 1, "gibbs": 1, "mh": 50} if warm else {"hmc": 3, "gibbs": 5, "mh": 200})[
+            method
+        ]
+    max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
+    runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
+    z = runner.run(z, burn_in, adapt=True)[:, -1] if burn_in else z
+    chain_draws = [[] for _ in range(chains)]
+    steps = 0
+    while min(len(c) for c in chain_draws) < per_chain and steps < max_steps:
+        need = per_chain - min(len(c) for c in chain_draws)
+        count = min(need, max_steps - steps)
+        block = runner.run(z, count, thin=thin)  # (C, B, m)
+        z, steps = block[:, -1], steps + count
+        ok = _consistent_rows(shape, sub, block.reshape(-1, shape.n_basis))
+        ok = ok.reshape(chains, -1)
+        for c in range(chains):  # C is small (a handful of chains)
+            chain_draws[c].extend(block[c, ok[c]])
+    length = min(len(c) for c in chain_draws)
+    draws = np.array([c[:length] for c in chain_draws]).reshape(chains, length, shape.n_basis)
+    z = draws.swapaxes(0, 1).reshape(-1, shape.n_basis)[:n_samples]
+    vertices = shape.vertices(z)
+    if length >= 2:
+        ess_coords = effective_sample_size(draws @ shape.basis.T + shape.mean)
+        ess = float(ess_coords.min()) * len(z) / (chains * length)
+    else:
+        ess = float(len(z))
+    info.update(
+        runner.stats,
+        steps=steps,
+        burn_in=burn_in,
+        pairs=system.n_pairs,
+        warm_seeds=distinct if init_z is not None else 0,
+        pairs_total=len(sub) * shape.n_edges,
+        verified_fraction=sum(len(c) for c in chain_draws) / max(steps * chains, 1),
+    )
+    if method == "mh":
+        info["mh_scale"] = float(runner.scale)
+    return PosteriorSamples(z, vertices, method, ess, time.perf_counter() - start, dropped, info)

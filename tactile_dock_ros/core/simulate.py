@@ -1,0 +1,320 @@
+"""Deterministic ground-truth execution of a guarded, compliant path on a known polyline.
+
+The motion model of paper Sec. III-A2 and V-A, shared with the probabilistic simulation
+(``core.probsim``) so that eq. (19) and the closed form estimate the same event:
+
+* The tool is a point moving along straight guarded moves between waypoints. It stops at its first
+  contact: the first crossing of an edge from its outer side (front-facing, ``cross(d - c, b - a)
+  > 0``). Crossings of an edge from behind are not contacts: a free tool can only meet a surface
+  from outside.
+* A contact on a move before the last one is a collision: the tool stops, nothing docks.
+* On the last (loading) move the tool pushes with force direction ``load``. On an edge it sticks
+  when the reaction ``-load`` lies in the edge's Coulomb cone, otherwise it slides toward the
+  edge's first vertex c ("slide left", counter-clockwise of the motion) or last vertex d ("slide
+  right"). Without compliance a slide ends the move undocked. With compliance the tool slides to
+  the vertex (the load exceeds friction along the whole edge, Sec. V-A), then either continues
+  onto the next edge in the same sense, sticks at the vertex (the next edge faces the load and
+  does not let it slide on: a trap), or separates (the next edge turns away from the load,
+  ``cross(load_reaction, t) <= 0``, or the polyline ends). Decision as in the paper: a separation
+  ends the move undocked; the tool does not fly on to a later contact.
+* The remaining length of the loading move does not limit the slide: once in contact the robot
+  keeps pushing with the load until it sticks or separates.
+
+Edge functionals (linear in an edge's direction vector t = d - c, also used by ``probsim``):
+``friction_functionals(load, mu)`` gives rows wL, wR, wN with reaction r = -load:
+slide left iff ``wL . t > 0``, slide right iff ``wR . t > 0``, faces the load iff ``wN . t > 0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .history import History, Status
+
+# Outcome codes of the batched simulation.
+STUCK_EDGE, STUCK_VERTEX, SEPARATED, SLID, NO_CONTACT, COLLIDED = range(6)
+
+
+class Feature(NamedTuple):
+    """A shape feature: ``kind`` "vertex" or "edge" and its index (edge i = shape.edges[i])."""
+
+    kind: str
+    index: int
+
+
+@dataclass(frozen=True)
+class Execution:
+    """Result of ``guarded_path``: docked iff the load is resisted where the tool stopped."""
+
+    docked: bool
+    contact: bool
+    stop_point: np.ndarray  # (2,) metres
+    stop_feature: Feature | None  # where the tool stopped; None without contact
+    observations: History
+
+
+def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """z of the 2-D cross product over the last axis: u_x v_y - u_y v_x."""
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def unit(vector, name: str) -> np.ndarray:
+    """Finite, non-zero 2-vector scaled to unit length; ValueError otherwise."""
+    v = np.asarray(vector, dtype=float).reshape(2)
+    norm = float(np.hypot(*v))
+    if not np.isfinite(norm) or norm <= 0.0:
+        raise ValueError(f"{name} must be a finite non-zero 2-vector, got {v}")
+    return v / norm
+
+
+def friction_functionals(load, friction: float) -> np.ndarray:
+    """(3, 2) rows wL, wR, wN: slide-left / slide-right / facing tests ``w . t > 0`` on t = d - c.
+
+    With r = -load (unit) and r_perp its CCW perpendicular, the edge's outward normal is
+    n = (t_y, -t_x); the contact presses into the edge iff r . n = r_perp . t > 0, the
+    tangential push toward c exceeds friction iff r . t > mu r_perp . t (eq. 12's slip-left
+    cone), and toward d iff -r . t > mu r_perp . t.
+    """
+    r = -unit(load, "load")
+    r_perp = np.array([-r[1], r[0]])
+    return np.stack([r - friction * r_perp, -r - friction * r_perp, r_perp])
+
+
+def edge_index_arrays(n: int, closed: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edges (E, 2) and per vertex its left edge l(v) = (u, v) and right edge r(v) = (v, w).
+
+    Missing neighbours (the ends of an open polyline) are -1.
+    """
+    count = n if closed else n - 1
+    first = np.arange(count)
+    edges = np.stack([first, (first + 1) % n], axis=1)
+    left = np.full(n, -1)
+    right = np.full(n, -1)
+    left[edges[:, 1]] = first
+    right[edges[:, 0]] = first
+    return edges, left, right
+
+
+def _validate_path(path, minimum: int = 2) -> np.ndarray:
+    path = np.asarray(path, dtype=float)
+    if path.ndim != 2 or path.shape[1] != 2 or len(path) < minimum:
+        raise ValueError(f"path must be (L >= {minimum}, 2) waypoints, got shape {path.shape}")
+    if not np.all(np.isfinite(path)):
+        raise ValueError("path waypoints must be finite")
+    return path
+
+
+def _validate_vertices(vertices, closed: bool) -> np.ndarray:
+    v = np.asarray(vertices, dtype=float)
+    if v.ndim < 2 or v.shape[-1] != 2 or v.shape[-2] < (3 if closed else 2):
+        raise ValueError(f"vertices must be (..., n, 2) with enough vertices, got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("vertices must be finite")
+    return v
+
+
+def first_hits(c: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """First front-facing crossing of segments a->b with edges c->d (eqs. 4-10, exact).
+
+    c, d: (N, E, 2); a, b: broadcastable to (N, 2). Returns (hit (N,) bool, edge (N,) int,
+    s (N,) fraction along a->b, t (N,) fraction along the hit edge). Zero-length moves hit nothing.
+    """
+    a = np.broadcast_to(a, (c.shape[0], 2))[:, None, :]
+    move = np.broadcast_to(b, (c.shape[0], 2))[:, None, :] - a
+    tangent = d - c
+    alpha = cross(tangent, move)  # > 0: the move enters the solid through this edge
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = cross(tangent, c - a) / alpha
+        t = cross(move, c - a) / alpha
+    valid = (alpha > 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+    s = np.where(valid, s, np.inf)
+    edge = np.argmin(s, axis=1) if s.shape[1] else np.zeros(len(s), dtype=int)
+    rows = np.arange(len(s))
+    hit = valid[rows, edge] if s.shape[1] else np.zeros(len(s), dtype=bool)
+    return hit, edge, np.where(hit, s[rows, edge], np.nan), np.where(hit, t[rows, edge], np.nan)
+
+
+def _classify(tangents: np.ndarray, load, friction: float) -> np.ndarray:
+    """(..., E, 3) booleans slide-left, slide-right, faces-load per edge direction (..., E, 2)."""
+    return tangents @ friction_functionals(load, friction).T > 0.0
+
+
+def slide_outcomes(vertices, closed, edge, load, friction, compliant=True):
+    """Where a loading contact on ``edge`` ends (Sec. V-A2 motion model), vectorized over N.
+
+    vertices (N, n, 2); edge (N,) the first-contact edge. Returns (outcome (N,) in {STUCK_EDGE,
+    STUCK_VERTEX, SEPARATED, SLID}, vertex (N,) index where the tool stopped or -1, first_status
+    (N,) Status at the first contact: STICK, SLIP_LEFT or SLIP_RIGHT).
+    The compliant slide visits each vertex at most once, so the loop is bounded by n.
+    """
+    count, n = vertices.shape[:2]
+    edges, left, right = edge_index_arrays(n, closed)
+    tangents = vertices[:, edges[:, 1]] - vertices[:, edges[:, 0]]
+    flags = _classify(tangents, load, friction)  # (N, E, 3)
+    rows = np.arange(count)
+    first = flags[rows, edge]
+    status = np.where(
+        first[:, 0], Status.SLIP_LEFT, np.where(first[:, 1], Status.SLIP_RIGHT, Status.STICK)
+    )
+    outcome = np.where(status == Status.STICK, STUCK_EDGE, SLID if not compliant else -1)
+    vertex = np.where(status == Status.SLIP_LEFT, edges[edge, 0], edges[edge, 1])
+    vertex = np.where(outcome == -1, vertex, -1)  # only a compliant slide reaches a vertex
+    going_left = status == Status.SLIP_LEFT
+    for _ in range(n + 1):
+        active = np.flatnonzero(outcome == -1)
+        if not len(active):
+            break
+        v = vertex[active]
+        nxt = np.where(going_left[active], left[v], right[v])
+        ends = nxt < 0
+        f = flags[active, np.maximum(nxt, 0)]
+        continues = np.where(going_left[active], f[:, 0], f[:, 1]) & f[:, 2] & ~ends
+        separates = ends | ~f[:, 2]
+        outcome[active] = np.where(separates, SEPARATED, np.where(continues, -1, STUCK_VERTEX))
+        cont = active[continues]
+        e_next = nxt[continues]
+        vertex[cont] = np.where(going_left[cont], edges[e_next, 0], edges[e_next, 1])
+    outcome[outcome == -1] = SEPARATED  # only reachable on a closed loop, which cannot hold a load
+    return outcome, vertex, status
+
+
+def _run(vertices, closed, path, friction, load, compliant):
+    """Batched execution over shapes (N, n, 2). Returns per-sample arrays (see ``Execution``)."""
+    count, n = vertices.shape[:2]
+    edges, _, _ = edge_index_arrays(n, closed)
+    c, d = vertices[:, edges[:, 0]], vertices[:, edges[:, 1]]
+    outcome = np.full(count, NO_CONTACT)
+    segment = np.full(count, len(path) - 2)
+    edge = np.zeros(count, dtype=int)
+    s_hit = np.full(count, np.nan)
+    free = np.ones(count, dtype=bool)
+    for i in range(len(path) - 1):  # waypoint segments, a handful
+        hit, e, s, _ = first_hits(c[free], d[free], path[i], path[i + 1])
+        idx = np.flatnonzero(free)[hit]
+        outcome[idx] = COLLIDED
+        segment[idx], edge[idx], s_hit[idx] = i, e[hit], s[hit]
+        free[idx] = False
+    loading = (outcome == COLLIDED) & (segment == len(path) - 2)
+    status = np.full(count, Status.COLLIDE)
+    vertex = np.full(count, -1)
+    if np.any(loading):
+        out, vert, stat = slide_outcomes(
+            vertices[loading], closed, edge[loading], load, friction, compliant
+        )
+        outcome[loading], vertex[loading], status[loading] = out, vert, stat
+    return outcome, segment, edge, s_hit, vertex, status
+
+
+def guarded_path(
+    vertices,
+    closed: bool,
+    path,
+    friction: float,
+    load,
+    compliant: bool = True,
+    contact_resolution: float = 0.005,
+) -> Execution:
+    """Execute ``path`` (L, 2) on the known polyline ``vertices`` (n, 2); see the module doc.
+
+    ``observations``: one FREE segment per travelled waypoint segment (the contacting one ends
+    ``contact_resolution`` metres before the contact point, and is dropped when nothing remains),
+    then a contact segment of length ``contact_resolution`` centred on the first contact point
+    along the move, with status COLLIDE (a move before the last) or STICK / SLIP_LEFT /
+    SLIP_RIGHT (the loading move; the status of the first contact, even if a compliant slide then
+    sticks at a vertex). The stop point is the contact point, or the vertex where a slide ended.
+    """
+    v = _validate_vertices(vertices, closed)
+    if v.ndim != 2:
+        raise ValueError("guarded_path takes one shape (n, 2); use monte_carlo_dock_probability")
+    path = _validate_path(path)
+    if not np.isfinite(contact_resolution) or contact_resolution <= 0:
+        raise ValueError(f"contact_resolution must be > 0, got {contact_resolution}")
+    unit(load, "load")
+    outcome, segment, edge, s_hit, vertex, status = (
+        x[0] for x in _run(v[None], closed, path, friction, load, compliant)
+    )
+    n_seg = int(segment) + 1 if outcome != NO_CONTACT else len(path) - 1
+    starts, ends = list(path[: n_seg - 1]), list(path[1:n_seg])
+    if outcome == NO_CONTACT:
+        starts.append(path[-2])
+        ends.append(path[-1])
+        obs = History(np.array(starts), np.array(ends), np.zeros(len(starts), dtype=int))
+        return Execution(False, False, path[-1].copy(), None, obs)
+    a, b = path[segment], path[segment + 1]
+    direction = (b - a) / np.linalg.norm(b - a)
+    point = a + s_hit * (b - a)
+    back = point - contact_resolution * direction
+    if np.dot(back - a, direction) > 0:
+        starts.append(a)
+        ends.append(back)
+    half = 0.5 * contact_resolution * direction
+    starts.append(point - half)
+    ends.append(point + half)
+    codes = [Status.FREE] * (len(starts) - 1) + [int(status)]
+    obs = History(np.array(starts), np.array(ends), np.array(codes))
+    if outcome in (STUCK_VERTEX, SEPARATED):
+        stop, feature = v[vertex].copy(), Feature("vertex", int(vertex))
+    else:
+        stop, feature = point, Feature("edge", int(edge))
+    docked = bool(outcome in (STUCK_EDGE, STUCK_VERTEX))
+    return Execution(docked, True, stop, feature, obs)
+
+
+def dock_outcomes(samples, closed: bool, path, friction: float, load, compliant: bool = True):
+    """Per-sample docking indicators E_d(p, x^(i)) of eq. (19) for shapes (N, n, 2): (N,) bool."""
+    v = _validate_vertices(samples, closed)
+    if v.ndim == 2:
+        v = v[None]
+    unit(load, "load")
+    outcome = _run(v, closed, _validate_path(path), friction, load, compliant)[0]
+    return (outcome == STUCK_EDGE) | (outcome == STUCK_VERTEX)
+
+
+def monte_carlo_dock_probability(
+    samples, closed: bool, path, friction: float, load, compliant: bool = True
+) -> float:
+    """Eq. (19): the fraction of shape samples (N, n, 2) on which executing ``path`` docks."""
+    outcomes = dock_outcomes(samples, closed, path, friction, load, compliant)
+    if not len(outcomes):
+        raise ValueError("monte_carlo_dock_probability needs at least one sample")
+    return float(np.mean(outcomes))
+
+
+def docking_lines(vertices, closed: bool, load, fractions=(0.1, 0.3, 0.5, 0.7, 0.9)):
+    """Loading moves along ``load`` through points of every edge, from outside the bounding box.
+
+    Returns starts (K, 2) and ends (K, 2): each line passes through ``c + f (d - c)`` for each
+    fraction f and runs from one bounding-box diagonal before it to a small distance beyond.
+    """
+    v = np.asarray(vertices, dtype=float)
+    n = len(v)
+    edges, _, _ = edge_index_arrays(n, closed)
+    f = np.asarray(fractions, dtype=float)[:, None, None]
+    points = (v[edges[:, 0]] + f * (v[edges[:, 1]] - v[edges[:, 0]])).reshape(-1, 2)
+    u = unit(load, "load")
+    reach = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) + 1.0
+    return points - reach * u, points + 1e-3 * reach * u
+
+
+def feasible(problem, ground_truth) -> bool:
+    """Whether some loading move along ``problem.load`` docks on ``ground_truth`` (n, 2).
+
+    Decision: a docking site must be reachable by a straight compliant loading move from outside
+    the terrain's bounding box, so every edge is probed at five points by such a move (compliant
+    slides included, so vertex traps count). Approach paths from ``problem.start`` are not
+    checked: the problems' starts are above the terrain, in the open.
+    """
+    v = _validate_vertices(ground_truth, problem.prior.closed)
+    starts, ends = docking_lines(v, problem.prior.closed, problem.load)
+    shapes = np.broadcast_to(v, (len(starts), *v.shape))
+    edges, _, _ = edge_index_arrays(len(v), problem.prior.closed)
+    hit, edge, _, _ = first_hits(shapes[:, edges[:, 0]], shapes[:, edges[:, 1]], starts, ends)
+    if not np.any(hit):
+        return False
+    outcome, _, _ = slide_outcomes(
+        shapes[hit], problem.prior.closed, edge[hit], problem.load, problem.friction, True
+    )
+    return bool(np.any((outcome == STUCK_EDGE) | (outcome == STUCK_VERTEX)))

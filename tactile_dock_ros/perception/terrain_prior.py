@@ -1,0 +1,144 @@
+"""Terrain slice -> Gaussian shape prior x = A z + mu (paper Sec. III-A1), and the whole pipeline.
+
+Columns of A, in this order:
+- calibration: the extrinsic's 6x6 covariance pushed through the linearized in-plane motion of
+  each vertex, ``dp = t + r x (p - c)`` (c = camera centre, p on the plane): (tx, ty) are the
+  paper's translation columns, rz its small-angle rotation about the sensor, and an off-plane
+  camera (c_z != 0) turns the tilts rx, ry into in-plane translations ``(0, c_z rx)``,
+  ``(-c_z ry, 0)``; tz moves the extruded terrain along itself and has no in-plane effect.
+  The block is compressed by an SVD to its non-zero directions (same A A^T).
+- depth noise: one column per visible vertex along its viewing ray, std = the pixel depth std
+  sigma(z) scaled to the in-plane range (``sigma(z) |p - c|_xy / z``). Decision: the per-pixel
+  std is used even though a vertex is a median of several pixels, which keeps the band honest
+  about resampling and mixed pixels. Hidden vertices carry the linear interpolation of their
+  stretch's two end columns, so a hidden stretch moves with the ends it hangs from.
+- occlusion: per hidden stretch, the PCA columns of the constrained Brownian bridge
+  (``bridge.occlusion_columns``); its sample mean replaces the chord placeholders in mu.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core import prior as core_prior
+from ..core.shape import GaussianShape
+from .bridge import Sampler, occlusion_columns, sample_truncated_gaussian
+from .config import DepthNoise, Extrinsic, OcclusionParams, PerceptionConfig
+from .slicing import TerrainSlice, extract_slice
+
+
+def calibration_jacobian(vertices: np.ndarray, camera_centre: np.ndarray) -> np.ndarray:
+    """(2n, 6) in-plane vertex motion per (tx, ty, tz, rx, ry, rz) of the config convention."""
+    n = len(vertices)
+    unit = core_prior.translation_columns(n, 1.0, 1.0)
+    cz = camera_centre[2]
+    return np.hstack(
+        [
+            unit,
+            np.zeros((2 * n, 1)),
+            cz * unit[:, 1:2],  # rx: r x (p - c) has y-part -rx (p_z - c_z) = rx c_z
+            -cz * unit[:, 0:1],  # ry: x-part ry (p_z - c_z) = -ry c_z
+            core_prior.rotation_column(vertices, camera_centre[:2], 1.0),
+        ]
+    )
+
+
+def calibration_columns(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
+    """(2n, r <= 3) columns whose outer product is J Sigma J^T (see module docstring)."""
+    values, vectors = np.linalg.eigh(extrinsic.covariance)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))
+    block = calibration_jacobian(vertices, extrinsic.camera_centre) @ root
+    u, sv, _ = np.linalg.svd(block, full_matrices=False)
+    keep = sv > 1e-9 * max(sv.max(initial=0.0), 1e-300)
+    return u[:, keep] * sv[keep]
+
+
+def camera_depths(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
+    """(n,) optical-axis depth (metres) of plane points (x, y, 0) in the nominal camera."""
+    rel = np.column_stack([vertices, np.zeros(len(vertices))]) - extrinsic.camera_centre
+    return rel @ extrinsic.rotation[:, 2]
+
+
+def depth_noise_columns(
+    terrain: TerrainSlice, vertices: np.ndarray, extrinsic: Extrinsic, noise: DepthNoise
+) -> np.ndarray:
+    """(2n, n_visible) ray-noise columns; hidden rows interpolate their stretch's end rows."""
+    visible = np.flatnonzero(~terrain.hidden)
+    v = vertices[visible]
+    z = np.maximum(camera_depths(v, extrinsic), 1e-6)
+    sigma = noise.sigma(z) * np.linalg.norm(v - terrain.camera_xy, axis=1) / z
+    rows = core_prior.ray_columns(v, terrain.camera_xy, sigma).reshape(len(visible), 2, -1)
+    cols = np.zeros((len(vertices), 2, len(visible)))
+    cols[visible] = rows
+    for first, last in terrain.stretches:
+        inner = np.arange(first + 1, last)
+        lam = ((inner - first) / (last - first))[:, None, None]
+        cols[inner] = (1 - lam) * cols[first] + lam * cols[last]
+    return cols.reshape(2 * len(vertices), -1)
+
+
+def build_prior(
+    terrain: TerrainSlice,
+    extrinsic: Extrinsic,
+    noise: DepthNoise,
+    occlusion: OcclusionParams,
+    friction: float,
+    rng: np.random.Generator,
+    sampler: Sampler = sample_truncated_gaussian,
+) -> GaussianShape:
+    """GaussianShape prior of a slice (columns: calibration, depth noise, occlusion)."""
+    verts = terrain.vertices.copy()
+    n = len(verts)
+    blocks = []
+    for first, last in terrain.stretches:
+        k = last - first - 1
+        mean, basis = occlusion_columns(
+            verts[first],
+            verts[last],
+            k,
+            occlusion.bridge_sigma_m_per_sqrt_m,
+            occlusion.columns,
+            occlusion.samples,
+            occlusion.trajectories,
+            rng,
+            sampler,
+        )
+        verts[first + 1 : last] = mean
+        block = np.zeros((2 * n, basis.shape[1]))
+        block[2 * (first + 1) : 2 * last] = basis
+        blocks.append(block)
+    basis = np.hstack(
+        [
+            calibration_columns(verts, extrinsic),
+            depth_noise_columns(terrain, verts, extrinsic, noise),
+            *blocks,
+        ]
+    )
+    return GaussianShape(verts.ravel(), basis, closed=False, friction=friction)
+
+
+@dataclass(frozen=True)
+class Perception:
+    """Result of ``perceive``: the slice it was built from and the prior."""
+
+    slice: TerrainSlice
+    prior: GaussianShape
+
+
+def perceive(
+    depth_m: np.ndarray, K: np.ndarray, config: PerceptionConfig, rng: np.random.Generator
+) -> Perception:
+    """Depth image in metres (NaN invalid, e.g. from ``depth.decode_depth``) -> slice and prior.
+
+    Raises ``PerceptionError`` (a ValueError) when the image cannot give a prior.
+    """
+    depth = np.asarray(depth_m, float)
+    noise = config.depth_noise
+    depth = np.where((depth >= noise.min_range_m) & (depth <= noise.max_range_m), depth, np.nan)
+    terrain = extract_slice(
+        depth, K, config.extrinsic, config.slice, config.occlusion.max_hidden_vertices
+    )
+    prior = build_prior(terrain, config.extrinsic, noise, config.occlusion, config.friction, rng)
+    return Perception(terrain, prior)

@@ -1,0 +1,178 @@
+"""Probabilistic simulation: App. B accuracy of P(C_e) and the speed of P_dock per docking site.
+
+Accuracy: random uncertain segments; each side of eq. (25) by Monte Carlo (l.h.s.: the exact
+segment-segment test on samples of the edge; r.h.s.: the linearized conditions), RMSE of the
+univariate (26), bivariate (30) and sequential estimates against both.
+Speed: P_dock of the terminal move through every edge midpoint of a problem prior (default
+three_ledges), batched, against Monte Carlo eq. (19) with N samples per site and against scipy's
+bivariate CDF evaluating the same quadrants.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.stats import multivariate_normal
+
+from ..core import bvn, problems, probsim, simulate
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--segments", type=int, default=1000, help="random uncertain segments")
+    parser.add_argument("--mc", type=int, default=100_000, help="Monte Carlo samples per segment")
+    parser.add_argument("--problem", default="three_ledges", help="prior for the speed test")
+    parser.add_argument("--mc-dock", type=int, default=1000, help="eq. (19) samples per site")
+    parser.add_argument("--scipy-quadrants", type=int, default=2000, help="scipy calls timed")
+
+
+def _random_segments(rng, count):
+    """Uncertain edges (means (K, 4), covs (K, 4, 4)) and moves a, b (K, 2) aimed at them."""
+    c = rng.uniform(-0.5, 0.5, (count, 2))
+    ang = rng.uniform(0, 2 * np.pi, count)
+    length = rng.uniform(0.05, 0.3, count)
+    t = np.stack([np.cos(ang), np.sin(ang)], 1)
+    d = c + length[:, None] * t
+    root = rng.normal(size=(count, 4, 4)) * rng.uniform(0.005, 0.05, (count, 1, 1))
+    covs = root @ np.swapaxes(root, 1, 2)
+    normal = np.stack([t[:, 1], -t[:, 0]], 1)
+    target = c + rng.uniform(-0.2, 1.2, (count, 1)) * (d - c)
+    tilt = rng.uniform(-1.0, 1.0, count)
+    rot = np.stack([np.cos(tilt), -np.sin(tilt), np.sin(tilt), np.cos(tilt)], 1).reshape(-1, 2, 2)
+    direction = np.einsum("kij,kj->ki", rot, -normal)
+    a = target - rng.uniform(0.0, 0.3, (count, 1)) * direction
+    b = target + rng.uniform(0.0, 0.3, (count, 1)) * direction
+    return np.hstack([c, d]), covs, a, b
+
+
+def _accuracy(args, rng):
+    means, covs, a, b = _random_segments(rng, args.segments)
+    lhs, rhs = np.zeros(args.segments), np.zeros(args.segments)
+    est = {m: np.zeros(args.segments) for m in probsim.METHODS}
+    for k in range(args.segments):  # one segment per step: N x 4 samples each
+        y = rng.multivariate_normal(means[k], covs[k], args.mc, method="cholesky")
+        c, d = y[:, None, :2], y[:, None, 2:]
+        hit = simulate.first_hits(c, d, a[k], b[k])[0]
+        lhs[k] = hit.mean()
+        values, grads, _ = probsim._collision_conditions(a[k], b[k], means[k : k + 1])
+        lin = values[:, 0, 0][None] + (y - means[k]) @ grads[:, 0, 0].T
+        rhs[k] = np.mean(np.all(lin >= 0, axis=1))
+        for m in probsim.METHODS:
+            est[m][k] = probsim.segment_collision_probabilities(
+                a[k], b[k], means[k : k + 1], covs[k : k + 1], m
+            )[0, 0]
+    rows = {}
+    print(f"\nApp. B: {args.segments} random uncertain segments, Monte Carlo N = {args.mc}")
+    print(f"{'method':<12}{'RMSE vs lhs':>14}{'RMSE vs rhs':>14}")
+    for m in probsim.METHODS:
+        r_l = float(np.sqrt(np.mean((est[m] - lhs) ** 2)))
+        r_r = float(np.sqrt(np.mean((est[m] - rhs) ** 2)))
+        rows[m] = {"rmse_lhs": r_l, "rmse_rhs": r_r}
+        print(f"{m:<12}{r_l:>14.4f}{r_r:>14.4f}")
+    rows["mc_lhs_vs_rhs_rmse"] = float(np.sqrt(np.mean((lhs - rhs) ** 2)))
+    return rows
+
+
+def _median_time(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times)), out
+
+
+def _speed(args, rng):
+    prob = problems.get(args.problem)
+    shape = prob.prior
+    mv = shape.mean_vertices
+    mid = 0.5 * (mv[shape.edges[:, 0]] + mv[shape.edges[:, 1]])
+    starts, ends = mid - 0.15 * prob.load, mid + 0.15 * prob.load
+    sites = len(starts)
+    res = {"problem": args.problem, "sites": sites, "vertices": shape.n_vertices}
+    for method in ("sequential", "bivariate"):
+        t, out = _median_time(
+            lambda m=method: probsim.dock_probabilities(
+                shape, starts, ends, prob.load, True, None, m
+            ),
+            args.repeats,
+        )
+        res[f"probsim_{method}_s_per_site"] = t / sites
+        res[f"p_dock_{method}"] = out[0].tolist()
+    samples = shape.vertices(shape.sample_z(rng, args.mc_dock))
+
+    def monte_carlo():
+        return [
+            simulate.monte_carlo_dock_probability(samples, False, [s, e], prob.friction, prob.load)
+            for s, e in zip(starts, ends, strict=True)
+        ]
+
+    t_mc, mc = _median_time(monte_carlo, args.repeats)
+    res["mc_s_per_site"] = t_mc / sites
+    res["p_dock_mc"] = mc
+    for method in ("sequential", "bivariate"):
+        err = np.abs(np.array(res[f"p_dock_{method}"]) - np.array(mc))
+        res[f"mean_abs_diff_{method}_vs_mc"] = float(err.mean())
+    # The same quadrants through our bvn and through scipy: the collision pairs of every site.
+    means, covs = shape.edge_gaussians()
+    values, grads, _ = probsim._collision_conditions(starts, ends, means)
+    cov_g = np.einsum("iked,edf,jkef->ijke", grads, covs, grads)
+    quads = []
+    for i, j in ((0, 2), (1, 3)):
+        sd_i, sd_j = np.sqrt(cov_g[i, i]), np.sqrt(cov_g[j, j])
+        ok = (sd_i > 0) & (sd_j > 0)
+        quads.append(
+            np.stack(
+                [
+                    values[i][ok] / sd_i[ok],
+                    values[j][ok] / sd_j[ok],
+                    cov_g[i, j][ok] / (sd_i * sd_j)[ok],
+                ],
+                1,
+            )
+        )
+    quads = np.vstack(quads)
+    quads[:, 2] = np.clip(quads[:, 2], -1, 1)
+    t_ours, ours = _median_time(
+        lambda: bvn.quadrant(quads[:, 0], quads[:, 1], quads[:, 2]), args.repeats
+    )
+    pick = rng.choice(len(quads), min(args.scipy_quadrants, len(quads)), replace=False)
+
+    def scipy_cdf():
+        return [
+            multivariate_normal(mean=[0.0, 0.0], cov=[[1.0, r], [r, 1.0]], allow_singular=True).cdf(
+                [h, k]
+            )
+            for h, k, r in quads[pick]
+        ]
+
+    t_sp, sp = _median_time(scipy_cdf, args.repeats)
+    res["quadrants"] = len(quads)
+    res["bvn_s_per_quadrant"] = t_ours / len(quads)
+    res["scipy_s_per_quadrant"] = t_sp / len(pick)
+    res["bvn_max_abs_diff_vs_scipy"] = float(np.max(np.abs(ours[pick] - np.array(sp))))
+    res["speedup_vs_mc"] = res["mc_s_per_site"] / res["probsim_sequential_s_per_site"]
+    res["speedup_bivariate_vs_mc"] = res["mc_s_per_site"] / res["probsim_bivariate_s_per_site"]
+    res["speedup_bvn_vs_scipy"] = res["scipy_s_per_quadrant"] / res["bvn_s_per_quadrant"]
+    print(f"\nSpeed on {args.problem}: {sites} sites, median of {args.repeats} (shared machine)")
+    print(f"{'estimator':<34}{'ms / site':>12}{'mean |dP| vs MC':>18}")
+    for method in ("sequential", "bivariate"):
+        print(
+            f"{'probsim ' + method:<34}{1e3 * res[f'probsim_{method}_s_per_site']:>12.3f}"
+            f"{res[f'mean_abs_diff_{method}_vs_mc']:>18.4f}"
+        )
+    print(
+        f"{'Monte Carlo eq. 19, N = ' + str(args.mc_dock):<34}{1e3 * res['mc_s_per_site']:>12.3f}"
+    )
+    print(
+        f"quadrants: bvn {1e6 * res['bvn_s_per_quadrant']:.3f} us, scipy "
+        f"{1e6 * res['scipy_s_per_quadrant']:.1f} us, ratio {res['speedup_bvn_vs_scipy']:.0f}x; "
+        f"probsim vs MC {res['speedup_vs_mc']:.1f}x "
+        f"(bivariate {res['speedup_bivariate_vs_mc']:.1f}x)"
+    )
+    return res
+
+
+def run(args) -> dict:
+    rng = np.random.default_rng(args.seed)
+    return {"app_b": _accuracy(args, rng), "speed": _speed(args, rng)}

@@ -1,0 +1,168 @@
+"""Deterministic compliant simulator: hand-built cases, observations, eq. (19), feasibility."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_dock_ros.core import problems, simulate
+from tactile_dock_ros.core.history import Status
+from tactile_dock_ros.core.simulate import Feature
+
+DOWN = np.array([0.0, -1.0])
+MU = 0.5
+FLAT = np.array([[1.0, 0.0], [-1.0, 0.0]])  # right to left: solid below
+# A 45 degree slope (steeper than atan 0.5) ending in a corner against a steep wall on the left.
+CORNER = np.array([[1.0, 1.0], [0.0, 0.0], [-0.2, 1.0]])
+# The same slope continuing with a flat floor, with a cliff (convex turn away), or just ending.
+SLOPE_FLAT = np.array([[1.0, 1.0], [0.0, 0.0], [-1.0, 0.0]])
+SLOPE_CLIFF = np.array([[1.0, 1.0], [0.0, 0.0], [0.0, -1.0], [-1.0, -1.0]])
+SLOPE_END = np.array([[1.0, 1.0], [0.0, 0.0]])
+# A slope with a small notch half way: the tool slides into it and is trapped.
+NOTCH = np.array([[1.0, 1.0], [0.1, 0.1], [0.05, 0.0], [0.0, 0.08], [-1.0, -0.92]])
+
+
+def _run(vertices, path, compliant=True, load=DOWN, closed=False):
+    return simulate.guarded_path(vertices, closed, np.array(path, float), MU, load, compliant, 0.01)
+
+
+def test_flat_ledge_sticks():
+    ex = _run(FLAT, [[0.2, 1.0], [0.2, -1.0]])
+    assert ex.docked and ex.contact
+    assert ex.stop_feature == Feature("edge", 0)
+    assert np.allclose(ex.stop_point, [0.2, 0.0])
+    obs = ex.observations
+    assert obs.status.tolist() == [Status.FREE, Status.STICK]
+    assert np.allclose(obs.a, [[0.2, 1.0], [0.2, 0.005]])
+    assert np.allclose(obs.b, [[0.2, 0.01], [0.2, -0.005]])
+
+
+def test_load_outside_cone_slips_on_flat():
+    # pushing at 70 degrees from the normal exceeds atan(0.5): slides toward c (right, +x)
+    load = np.array([np.sin(np.deg2rad(70)), -np.cos(np.deg2rad(70))])
+    ex = _run(FLAT, [[0.0, 0.5], [0.0, 0.0] + 0.5 * load], load=load)
+    assert not ex.docked
+    assert ex.observations.status[-1] == Status.SLIP_LEFT
+    assert ex.stop_feature == Feature("vertex", 0)  # slid to the end of the ledge and fell off
+
+
+def test_steep_slope_slides_to_corner():
+    ex = _run(CORNER, [[0.5, 2.0], [0.5, 0.0]])
+    assert ex.docked
+    assert ex.stop_feature == Feature("vertex", 1)
+    assert np.allclose(ex.stop_point, [0.0, 0.0])
+    assert ex.observations.status[-1] == Status.SLIP_RIGHT
+    rigid = _run(CORNER, [[0.5, 2.0], [0.5, 0.0]], compliant=False)
+    assert not rigid.docked and rigid.stop_feature == Feature("edge", 0)
+    assert np.allclose(rigid.stop_point, [0.5, 0.5])
+
+
+@pytest.mark.parametrize(
+    ("shape", "docked", "vertex"),
+    [(SLOPE_FLAT, True, 1), (SLOPE_CLIFF, False, 1), (SLOPE_END, False, 1)],
+)
+def test_vertex_between_two_edges(shape, docked, vertex):
+    ex = _run(shape, [[0.5, 2.0], [0.5, 0.0]])
+    assert ex.docked is docked
+    assert ex.stop_feature == Feature("vertex", vertex)
+
+
+def test_notch_traps_and_slope_continues():
+    ex = _run(NOTCH, [[0.6, 2.0], [0.6, 0.0]])
+    assert ex.docked and ex.stop_feature == Feature("vertex", 2)
+    # Without the notch the tool slides past vertex 1 and off the far end of the slope.
+    smooth = np.array([[1.0, 1.0], [0.1, 0.1], [-1.0, -1.0]])
+    ex = _run(smooth, [[0.6, 2.0], [0.6, 0.0]])
+    assert not ex.docked and ex.stop_feature == Feature("vertex", 2)
+
+
+def test_prefix_collision_and_no_contact():
+    ex = _run(FLAT, [[0.5, 1.0], [0.5, -0.5], [0.0, -0.5], [0.0, -1.0]])
+    assert ex.contact and not ex.docked
+    assert ex.observations.status.tolist() == [Status.FREE, Status.COLLIDE]
+    miss = _run(FLAT, [[0.0, 1.0], [0.5, 1.0], [0.5, 0.5]])
+    assert not miss.contact and not miss.docked and miss.stop_feature is None
+    assert miss.observations.status.tolist() == [Status.FREE, Status.FREE]
+    assert np.allclose(miss.stop_point, [0.5, 0.5])
+    # A move that crosses an edge from behind (from inside the solid) is not a contact.
+    behind = _run(FLAT, [[0.0, -1.0], [0.0, 1.0]])
+    assert not behind.contact
+
+
+def test_bad_input():
+    with pytest.raises(ValueError):
+        _run(FLAT, [[0.0, 1.0]])
+    with pytest.raises(ValueError):
+        _run(FLAT, [[0.0, 1.0], [np.nan, 0.0]])
+    with pytest.raises(ValueError):
+        _run(np.array([[0.0, 0.0], [np.inf, 1.0]]), [[0.0, 1.0], [0.0, -1.0]])
+    with pytest.raises(ValueError):
+        _run(FLAT, [[0.0, 1.0], [0.0, -1.0]], load=[0.0, 0.0])
+    # A zero-length loading move touches nothing.
+    assert not _run(FLAT, [[0.0, 1.0], [0.0, 1.0]]).contact
+
+
+def _crosses(a, b, vertices):
+    c, d = vertices[:-1], vertices[1:]
+    den = simulate.cross(d - c, b - a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = simulate.cross(d - c, c - a) / den
+        t = simulate.cross(b - a, c - a) / den
+    return bool(np.any((den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=8),
+    st.floats(-0.8, 0.8),
+    st.floats(-0.6, 0.6),
+)
+def test_observations_are_consistent_with_truth(heights, x, tilt):
+    xs = np.linspace(1.0, -1.0, len(heights))
+    truth = np.stack([xs, heights], axis=1)
+    load = np.array([np.sin(tilt), -np.cos(tilt)])
+    start = np.array([x, 1.0])
+    ex = _run(truth, [start, start + 2.5 * load], load=load)
+    obs = ex.observations
+    for a, b, s in zip(obs.a, obs.b, obs.status, strict=True):
+        if s == Status.FREE and np.linalg.norm(b - a) > 0:
+            assert not _crosses(a, b, truth)
+        elif s != Status.FREE:
+            assert _crosses(a, b, truth)
+    assert ex.contact == bool(np.any(obs.is_contact))
+
+
+def test_monte_carlo_matches_hand_count():
+    rng = np.random.default_rng(3)
+    # Slopes of random angle: docks on the flat edge iff the angle is within atan(mu).
+    angles = rng.uniform(-0.9, 0.9, 400)
+    samples = np.stack(
+        [
+            np.stack([np.cos(angles), np.sin(angles)], 1),
+            -np.stack([np.cos(angles), np.sin(angles)], 1),
+        ],
+        axis=1,
+    )
+    path = [[0.0, 2.0], [0.0, -2.0]]
+    p = simulate.monte_carlo_dock_probability(samples, False, path, MU, DOWN, compliant=False)
+    assert p == pytest.approx(np.mean(np.abs(angles) <= np.arctan(MU)))
+    with pytest.raises(ValueError):
+        simulate.monte_carlo_dock_probability(samples[:0], False, path, MU, DOWN)
+
+
+def test_feasible():
+    sloper = problems.get("sloper")
+    mean = sloper.prior.mean_vertices
+    assert simulate.feasible(sloper, mean) in (True, False)
+    steep = mean.copy()
+    flatter = mean.copy()
+    # rotate the shape about its centre to make the top slope steeper / flatter than atan(mu)
+    for out, ang in ((steep, -0.15), (flatter, 0.15)):  # CCW flattens it
+        centre = mean.mean(axis=0)
+        rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+        out[:] = (mean - centre) @ rot.T + centre
+    assert not simulate.feasible(sloper, steep)
+    assert simulate.feasible(sloper, flatter)
+    assert simulate.feasible(sloper, FLAT)
+    assert simulate.feasible(sloper, CORNER)
+    assert not simulate.feasible(sloper, SLOPE_CLIFF[:3])
