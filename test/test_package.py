@@ -61,22 +61,18 @@ def test_package_xml_is_valid_format_3(package):
     assert package.get_build_type() == "ament_cmake"
 
 
-def test_runtime_imports_are_exec_dependencies(package):
-    declared = {d.name for d in package.exec_depends + package.build_export_depends}
-    imported = _top_level_imports(REPO_ROOT / "tactile_dock_ros")
+@pytest.mark.parametrize(
+    ("tree", "kinds"),
+    [("tactile_dock_ros", ("exec_depends",)), ("test", ("exec_depends", "test_depends"))],
+)
+def test_imports_are_declared(package, tree, kinds):
+    """Code under tactile_dock_ros/ needs exec_depends; tests may also use test_depends."""
+    declared = {d.name for kind in kinds for d in getattr(package, kind)}
+    imported = _top_level_imports(REPO_ROOT / tree)
     unknown = imported - ROSDEP_KEYS.keys()
     assert not unknown, f"add a rosdep key for {unknown} to ROSDEP_KEYS and package.xml"
     missing = {ROSDEP_KEYS[name] for name in imported} - declared
-    assert not missing, f"package.xml lacks exec_depend {missing}"
-
-
-def test_test_imports_are_declared(package):
-    declared = {d.name for d in package.exec_depends + package.test_depends}
-    imported = _top_level_imports(REPO_ROOT / "test")
-    unknown = imported - ROSDEP_KEYS.keys()
-    assert not unknown, f"add a rosdep key for {unknown} to ROSDEP_KEYS and package.xml"
-    missing = {ROSDEP_KEYS[name] for name in imported} - declared
-    assert not missing, f"package.xml lacks test_depend {missing}"
+    assert not missing, f"package.xml lacks {kinds} {missing}"
 
 
 def test_ruff_passes_on_the_whole_tree():

@@ -17,6 +17,11 @@ from .history import History
 from .shape import GaussianShape
 
 
+def _quad_gradient(y: np.ndarray) -> np.ndarray:
+    """Gradient of ``quad`` at y (..., 4)."""
+    return np.stack([-y[..., 3], y[..., 2], y[..., 1], -y[..., 0]], axis=-1)
+
+
 class HistoryConstraints:
     """f_H restricted to (observation, edge) ``pairs`` (eqs. 1-3, 16-17) as a function of z."""
 
@@ -32,8 +37,6 @@ class HistoryConstraints:
         self.n_obs = len(history)
         self.n_pairs = len(pairs)
         self._rows = rows
-        self._basis_t = np.ascontiguousarray(shape.basis.T)  # (m, 2n)
-        self._basis_rows = shape.basis[rows]  # (P, 4, m)
         self._mean_y = shape.mean[rows]  # (P, 4)
         self._sign, self._lin, self._const = sign[obs], lin[obs], const[obs]
         self._active = active[obs]
@@ -44,21 +47,38 @@ class HistoryConstraints:
         self.n_prims = len(self.prim_pair)
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
-        # constants of every primitive along a trajectory
-        self._lin_mean = np.einsum("pkj,pj->pk", self._lin, self._mean_y) + self._const
+        # flat per-primitive coefficients (K,), (K, 4), (K,)
+        self._psign = self._sign[self.prim_pair, self.prim_slot]
+        self._plin = self._lin[self.prim_pair, self.prim_slot]
+        self._pconst = self._const[self.prim_pair, self.prim_slot]
+        # g_k(z) = g_mean + L_k . z + s_k quad(A_k z): only g1 (sign -1) and g2 (sign +1) are
+        # quadratic, and they are the first two slot blocks (pairs 0..P-1 each)
+        mean_y = self._mean_y[self.prim_pair]
+        grad_mean = self._psign[:, None] * _quad_gradient(mean_y) + self._plin  # (K, 4)
+        self._g_mean = self._psign * quad(mean_y) + np.sum(self._plin * mean_y, -1) + self._pconst
+        pair_basis = shape.basis[rows]  # (P, 4, m)
+        self._lin_z = np.einsum("kj,kjm->mk", grad_mean, pair_basis[self.prim_pair]).copy()
+        self._pair_basis = np.ascontiguousarray(pair_basis.reshape(-1, self.n_dim).T)  # (m, 4P)
 
     def _y(self, z: np.ndarray) -> np.ndarray:
         """Displacements A z of the pair coordinates, (..., P, 4)."""
-        return (z @ self._basis_t)[..., self._rows]
+        return (z @ self._pair_basis).reshape(*z.shape[:-1], self.n_pairs, 4)
 
-    def _flat(self, per_slot: np.ndarray) -> np.ndarray:
-        return per_slot[..., self.prim_pair, self.prim_slot]
+    def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Per-primitive values (..., K): ``lin`` (modified in place) plus the per-pair
+        quadratic term ``q`` (..., P) with sign -1 for g1 and +1 for g2."""
+        p = self.n_pairs
+        lin[..., :p] -= q
+        lin[..., p : 2 * p] += q
+        return lin
 
     def values(self, z: np.ndarray) -> np.ndarray:
         """Primitive values (..., K) at states z (..., m)."""
-        y = self._y(z) + self._mean_y
-        g = self._sign * quad(y)[..., None] + np.einsum("...pj,pkj->...pk", y, self._lin)
-        return self._flat(g + self._const)
+        return self._with_quadratic(z @ self._lin_z + self._g_mean, quad(self._y(z)))
+
+    def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
+        """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
+        return self._prim_index[pair, slot]
 
     def _slots(self, g: np.ndarray) -> np.ndarray:
         full = np.full((*g.shape[:-1], self.n_pairs, 6), -np.inf)
@@ -99,16 +119,23 @@ class HistoryConstraints:
         return prim, sign
 
     def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        """(C, K) mask: quadratic primitives (g1, g2) of pairs whose linear primitives cannot
-        reach a crossing pattern in the window are not worth solving (their roots never change
-        a pair's status). g0: values at the window start; may_vanish: linear ones may vanish."""
-        g = self._slots(g0)
-        vanish = self._slots(may_vanish.astype(float)) > 0
-        enter = np.all((g[..., 2:] <= 0) | vanish[..., 2:], axis=-1)  # -inf slots pass
-        g34, v34 = g[..., 2:4], vanish[..., 2:4]
-        leave = self.structure.free_pair & np.all((g34 >= 0) | v34, axis=-1)
-        needed = (enter | leave)[..., self.prim_pair]
-        return needed | self.linear
+        """(C, K) mask of the primitives whose roots can matter in a window: those of pairs that
+        can reach a crossing pattern (all primitives <= 0: enters; free pairs also all >= 0:
+        leaves). Any other pair keeps the sign of its value throughout the window (some
+        primitive keeps a strict sign against the pattern), so its roots change nothing.
+        g0: values at the window start; may_vanish: primitives not proven to keep their sign."""
+        p, nc = self.n_pairs, len(self._cone)
+
+        def every_slot(mask):
+            out = mask[..., :p] & mask[..., p : 2 * p] & mask[..., 2 * p : 3 * p]
+            out &= mask[..., 3 * p : 4 * p]
+            if nc:  # g5, g6 of the stick / slip pairs
+                out[..., self._cone] &= mask[..., 4 * p : 4 * p + nc] & mask[..., 4 * p + nc :]
+            return out
+
+        enter = every_slot((g0 <= 0) | may_vanish)
+        leave = self.structure.free_pair & every_slot((g0 >= 0) | may_vanish)
+        return (enter | leave)[..., self.prim_pair]
 
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
@@ -116,47 +143,32 @@ class HistoryConstraints:
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Trig coefficients (C, K, 5) of each primitive along mu + A(z0 cos t + p sin t)."""
-        mu, al, be = self._mean_y, self._y(z0), self._y(p)
-        s = self._sign
-        q_mm, q_aa, q_bb = quad(mu)[..., None], quad(al)[..., None], quad(be)[..., None]
-        q_ma, q_mb = bilinear(mu, al)[..., None], bilinear(mu, be)[..., None]
-        q_ab = bilinear(al, be)[..., None]
-        l_a = np.matmul(self._lin, al[..., None])[..., 0]  # (C, P, 6)
-        l_b = np.matmul(self._lin, be[..., None])[..., 0]
-        coef = np.stack(
-            np.broadcast_arrays(
-                s * (q_mm + 0.5 * (q_aa + q_bb)) + self._lin_mean,
-                2 * s * q_ma + l_a,
-                2 * s * q_mb + l_b,
-                0.5 * s * (q_aa - q_bb),
-                s * q_ab,
-            ),
-            axis=-1,
-        )
-        return coef[:, self.prim_pair, self.prim_slot]
+        c, k = len(z0), self.n_prims
+        al, be = self._y(z0), self._y(p)
+        q_aa, q_bb, q_ab = quad(al), quad(be), bilinear(al, be)
+        out = np.zeros((c, k, 5))
+        out[..., 0] = self._g_mean
+        out[..., 1] = z0 @ self._lin_z
+        out[..., 2] = p @ self._lin_z
+        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, q_ab)):
+            self._with_quadratic(out[..., j], q)
+        return out
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Polynomial coefficients (C, K, 3) of each primitive along mu + A(z0 + t d)."""
-        y0, v = self._y(z0) + self._mean_y, self._y(d)
-        s = self._sign
-        coef = np.stack(
-            [
-                s * quad(y0)[..., None] + np.einsum("cpj,pkj->cpk", y0, self._lin) + self._const,
-                2 * s * bilinear(y0, v)[..., None] + np.einsum("cpj,pkj->cpk", v, self._lin),
-                s * quad(v)[..., None],
-            ],
-            axis=-1,
-        )
-        return coef[:, self.prim_pair, self.prim_slot]
+        y0, v = self._y(z0), self._y(d)
+        out = np.zeros((len(z0), self.n_prims, 3))
+        out[..., 0] = self.values(z0)
+        out[..., 1] = self._with_quadratic(d @ self._lin_z, 2 * bilinear(y0, v))
+        self._with_quadratic(out[..., 2], quad(v))
+        return out
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
-        pair, slot = self.prim_pair[prim], self.prim_slot[prim]
-        rows = self._basis_rows[pair]  # (C, 4, m)
-        y = np.einsum("cjm,cm->cj", rows, z) + self._mean_y[pair]
-        grad_quad = np.stack([-y[:, 3], y[:, 2], y[:, 1], -y[:, 0]], axis=1)
-        grad_y = self._sign[pair, slot][:, None] * grad_quad + self._lin[pair, slot]
-        return np.einsum("cj,cjm->cm", grad_y, rows)
+        rows = self.shape.basis[self._rows[self.prim_pair[prim]]]  # (C, 4, m)
+        y = np.einsum("cjm,cm->cj", rows, z)
+        quad_part = np.einsum("cj,cjm->cm", _quad_gradient(y), rows)
+        return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
 
 
 class LinearConstraints:

@@ -182,8 +182,8 @@ def observation_violations(
     v = _check_vertices(vertices)
     edges = _edges(v.shape[1], shape_closed)
     k = len(history)
-    if k == 0:
-        return np.zeros((len(v), 0))
+    if k == 0 or len(v) == 0:
+        return np.zeros((len(v), k))
     seg_lo = np.minimum(history.a, history.b)
     seg_hi = np.maximum(history.a, history.b)
     ends = v[:, edges]  # (N, E, 2, 2)

@@ -25,7 +25,10 @@ _IMAG_TOL = 1e-6
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form."""
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.abs(c))
+    scale = np.where(scale > 0, scale, 1.0)
+    a, b, c = a / scale, b / scale, c / scale
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         disc = b * b - 4 * a * c
         q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
         r1 = np.where(a != 0, q / a, -c / b)
@@ -62,33 +65,58 @@ def trig_basis(t: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
 
 
-def _sorted_roots(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Keep roots (C, K, r) strictly inside (lo, hi) per row; sort; pad with inf."""
-    c = roots.shape[0]
-    flat = roots.reshape(c, -1)
-    owner = np.broadcast_to(np.arange(roots.shape[1])[:, None], roots.shape[1:]).reshape(-1)
-    inside = (flat > lo[:, None]) & (flat < hi[:, None])
-    flat = np.where(inside, flat, np.inf)
-    width = max(int(inside.sum(axis=1).max(initial=0)), 0)
-    order = np.argsort(flat, axis=1)[:, :width]
-    return np.take_along_axis(flat, order, axis=1), np.where(
-        np.isfinite(np.take_along_axis(flat, order, axis=1)), owner[order], -1
-    )
+def _sorted_roots(
+    row: np.ndarray, roots: np.ndarray, owner: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pad candidate roots into (C, R) rows sorted ascending (inf padding, owner -1).
+
+    row (n,), roots (n, r), owner (n,): candidates of primitive ``owner`` on row ``row``; only
+    those strictly inside (lo[row], hi[row]) are kept. Work is linear in the candidates.
+    """
+    c = len(lo)
+    rows = np.repeat(row, roots.shape[1])
+    times = roots.reshape(-1)
+    owners = np.repeat(owner, roots.shape[1])
+    keep = (times > lo[rows]) & (times < hi[rows])  # NaN fails both
+    rows, times, owners = rows[keep], times[keep], owners[keep]
+    order = np.lexsort((times, rows))
+    rows, times, owners = rows[order], times[order], owners[order]
+    counts = np.bincount(rows, minlength=c)
+    width = int(counts.max(initial=0))
+    slot = np.arange(len(rows)) - (np.cumsum(counts) - counts)[rows]
+    out = np.full((c, width), np.inf)
+    who = np.full((c, width), -1)
+    out[rows, slot] = times
+    who[rows, slot] = owners
+    return out, who
+
+
+# (1 + u^2)^2 g(t) in ascending powers of u = tan(t/2) from (k0, ..., k4): the quartic of
+# ``ellipse_roots``; and power -> Bernstein coefficients on [0, 1]: b_i = sum_l C(i,l)/C(4,l) c_l
+_TRIG_TO_POLY = np.array(
+    [[1, 1, 0, 1, 0], [0, 0, 2, 0, 4], [2, 0, 0, -6, 0], [0, 0, 2, 0, -4], [1, -1, 0, 1, 0]],
+    dtype=float,
+)
+_POWER_TO_BERNSTEIN = np.array(
+    [
+        [1, 0, 0, 0, 0],
+        [1, 1 / 4, 0, 0, 0],
+        [1, 2 / 4, 1 / 6, 0, 0],
+        [1, 3 / 4, 3 / 6, 1 / 4, 0],
+        [1, 1, 1, 1, 1],
+    ]
+)
 
 
 def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-    """(C, K) False where a trigonometric primitive provably keeps its sign on [0, t_max[c]]
-    (t_max < pi): |g(0)| exceeds a bound on |g(t) - g(0)| built from |k_i| and t_max."""
-    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
-    t = np.asarray(t_max, dtype=float)[:, None]
-    sin_max = np.where(t >= np.pi / 2, 1.0, np.sin(t))  # max of |sin| on [0, t]
-    change = (
-        np.abs(k1) * (1 - np.cos(t))
-        + np.abs(k2) * sin_max
-        + np.abs(k3) * 2 * sin_max**2
-        + np.abs(k4) * np.sin(np.minimum(2 * t, np.pi / 2))
-    )
-    return np.abs(k0 + k1 + k3) <= change
+    """(C, K) False where a trigonometric primitive provably keeps a strict sign on
+    [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in u = tan(t/2) on
+    [0, tan(t_max/2)] share one strict sign (the polynomial lies in their convex hull)."""
+    u_max = np.tan(0.5 * np.asarray(t_max, dtype=float))
+    powers = u_max[:, None] ** np.arange(5)  # substitute u = u_max s, s in [0, 1]
+    maps = (_POWER_TO_BERNSTEIN * powers[:, None]) @ _TRIG_TO_POLY  # (C, 5, 5)
+    bern = np.matmul(maps, np.swapaxes(coef, 1, 2))  # (C, 5, K)
+    return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
 def ellipse_roots(
@@ -105,34 +133,28 @@ def ellipse_roots(
     k3 = k4 = 0); t_max must be < pi.
     """
     t_max = np.asarray(t_max, dtype=float)
-    k0, k1, k2, k3, k4 = np.moveaxis(coef, -1, 0)
-    c, n_prims = k0.shape
-    roots = np.full((c, n_prims, 4), np.nan)
+    lo = np.full(len(t_max), t_min)
     ci, ki = np.nonzero(solve & linear[None])
-    if ci.size:
-        u = quadratic_roots(k0[ci, ki] - k1[ci, ki], 2 * k2[ci, ki], k0[ci, ki] + k1[ci, ki])
-        roots[ci, ki, :2] = u
-    ci, ki = np.nonzero(solve & ~linear[None])
-    if ci.size:
-        poly = np.stack(
-            [
-                k0[ci, ki] - k1[ci, ki] + k3[ci, ki],
-                2 * k2[ci, ki] - 4 * k4[ci, ki],
-                2 * k0[ci, ki] - 6 * k3[ci, ki],
-                2 * k2[ci, ki] + 4 * k4[ci, ki],
-                k0[ci, ki] + k1[ci, ki] + k3[ci, ki],
-            ],
-            axis=-1,
-        )
-        roots[ci, ki] = quartic_roots(poly)
-    times = 2 * np.arctan(roots)
-    return _sorted_roots(times, np.full(c, t_min), t_max)
+    k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
+    lin = quadratic_roots(k0 - k1, 2 * k2, k0 + k1)  # (n, 2)
+    cq, kq = np.nonzero(solve & ~linear[None])
+    k0, k1, k2, k3, k4 = (coef[cq, kq, j] for j in range(5))
+    poly = np.stack(
+        [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
+    )
+    quart = quartic_roots(poly) if cq.size else np.zeros((0, 4))
+    u = np.concatenate([np.pad(lin, ((0, 0), (0, 2)), constant_values=np.nan), quart])
+    return _sorted_roots(
+        np.concatenate([ci, cq]), 2 * np.arctan(u), np.concatenate([ki, kq]), lo, t_max
+    )
 
 
 def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Parameters in (lo[c], hi[c]) where a primitive q0 + q1 t + q2 t^2 vanishes, sorted (C, R)."""
-    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0])
-    return _sorted_roots(roots, np.asarray(lo, float), np.asarray(hi, float))
+    c, k = coef.shape[:2]
+    roots = quadratic_roots(coef[..., 2], coef[..., 1], coef[..., 0]).reshape(c * k, 2)
+    row, owner = np.divmod(np.arange(c * k), k)
+    return _sorted_roots(row, roots, owner, np.asarray(lo, float), np.asarray(hi, float))
 
 
 def segment_edges(roots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -168,6 +190,34 @@ class IntervalSet:
     @property
     def measure(self) -> float:
         return float(np.sum(self.bounds[:, 1] - self.bounds[:, 0]))
+
+
+def line_scan(system, z: np.ndarray, d: np.ndarray, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Segments of the lines z + t d, t in [lo, hi] (C rows), for a constraint system (see
+    ``core.constraint_systems``): boundaries (C, S+1) and per-segment observation values
+    (C, S, k) judged at the midpoints."""
+    coef = system.line_coefficients(z, d)
+    roots, _ = line_roots(coef, lo, hi)
+    edges, mids = segment_edges(roots, lo, hi)
+    powers = np.stack([np.ones_like(mids), mids, mids * mids], axis=-1)
+    return edges, system.violations(np.matmul(powers, coef.swapaxes(1, 2)))
+
+
+def line_feasible_set(system, z: np.ndarray, d: np.ndarray, lo: float, hi: float) -> IntervalSet:
+    """{t in [lo, hi] : f_H(z + t d) <= 0} for one line (Gibbs ranges, Sec. IV-E)."""
+    edges, values = line_scan(system, z[None], d[None], np.array([lo]), np.array([hi]))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
+
+
+def ellipse_feasible_set(system, z0: np.ndarray, p: np.ndarray, t_max: float) -> IntervalSet:
+    """{t in [0, t_max] : f_H(z0 cos t + p sin t) <= 0} for one ellipse (HMC ranges, Sec.
+    IV-E), every primitive solved (the sampler's filters skip provably irrelevant ones)."""
+    coef = system.ellipse_coefficients(z0[None], p[None])
+    span = np.array([t_max])
+    roots, _ = ellipse_roots(coef, np.ones(coef.shape[:2], dtype=bool), system.linear, span)
+    edges, mids = segment_edges(roots, np.zeros(1), span)
+    values = system.violations(np.matmul(trig_basis(mids), coef.swapaxes(1, 2)))
+    return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
 
 
 def normal_log_mass(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -11,7 +11,11 @@ Decisions where the paper is vague:
   (quadratic in the edge, linearized about its mean) and t >= 0, t <= 1 (linear), are evaluated on
   the edge's 4-D Gaussian, either as a product of four univariate probabilities (26) or as the
   product of two bivariate quadrants, pairs (I, III) = (s >= 0, t >= 0) and (II, IV) =
-  (s <= 1, t <= 1) (30).
+  (s <= 1, t <= 1) (30), or ("sequential", the default of ``dock_probability``) by Mendell-Elston
+  conditioning on all of them, with the stick / slide conditions of the loading move in the same
+  orthant (P(C_e, K_e) etc.; the pair products assume independence that fails badly when one
+  rotation drives both where an edge lies and how it is tilted: benchmark in docs/probsim.md).
+  With "univariate" / "bivariate", P(C_e, K_e) = P(C_e) P(K_e | C_e) as in the paper.
 * Stick / slide events only involve an edge's direction t = d - c: slide left iff wL.t > 0, slide
   right iff wR.t > 0, faces the load iff wN.t > 0 (``simulate.friction_functionals``). After a
   contact, P(K_e | C_e) = P(K_e) / P(wN.t > 0), since a contact implies the edge faces the move.

@@ -21,7 +21,7 @@ from .ess import effective_sample_size
 from .history import History
 from .intervals import (
     ellipse_roots,
-    line_roots,
+    line_scan,
     sample_truncated_normal,
     segment_edges,
     trig_basis,
@@ -30,7 +30,9 @@ from .intervals import (
 from .shape import GaussianShape
 
 METHODS = ("hmc", "gibbs", "mh", "rejection")
-LINE_HALF_WIDTH = 12.0  # line scans cover the conditional mean +- this many std (mass < 1e-32 lost)
+LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
+SEED_DESCENTS = 4
+WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
 
 
 @dataclass(frozen=True)
@@ -77,15 +79,11 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     dd = np.sum(d * d, axis=1)
     mean, std = -np.sum(z * d, axis=1) / dd, 1.0 / np.sqrt(dd)
     lo, hi = mean - LINE_HALF_WIDTH * std, mean + LINE_HALF_WIDTH * std
-    coef = system.line_coefficients(z, d)
-    roots, _ = line_roots(coef, lo, hi)
-    edges, mids = segment_edges(roots, lo, hi)
-    powers = np.stack([np.ones_like(mids), mids, mids * mids], axis=-1)
-    values = system.violations(np.einsum("csj,ckj->csk", powers, coef))
+    edges, values = line_scan(system, z, d, lo, hi)
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 16):
+def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 8):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
     such segment. Chunked: the first exit is usually among the first few roots."""
     c, n_seg = mids.shape
@@ -104,39 +102,48 @@ def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 1
     return hit, first
 
 
-def hmc_step(
+def hmc_chains(
     system,
     z: np.ndarray,
+    n_steps: int,
     rng: np.random.Generator,
     duration: float = np.pi / 2,
-    max_bounces: int = 100,
-    window: float = 0.15,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """One HMC-with-bouncing move per chain (Alg. 1): returns (z', moved (C,), bounces).
+    max_bounces: int = 500,
+    window: float | None = None,
+) -> tuple[np.ndarray, dict]:
+    """``n_steps`` HMC-with-bouncing moves (Alg. 1) of each chain z (C, m): (C, n_steps, m).
 
-    The feasible range is determined over look-ahead windows of at most ``window`` (rad) of the
-    trajectory; a window without an exit just advances the state, so fewer primitives can
-    vanish per solve (an exact reorganisation of Alg. 1's loop, not an approximation).
-
-    Follows z(t) = z0 cos t + p sin t; at the end of the feasible interval containing t = 0 the
-    momentum is reflected about the gradient of the primitive whose root ends it. Decisions: a
-    chain that needs more than ``max_bounces`` bounces, or whose first segment is judged
-    infeasible (numerical grazing), keeps its state for this step (moved = False). Roots closer
-    than 1e-9 to the start are ignored (the one just bounced on).
+    Each move draws p ~ N(0, I) and follows z(t) = z0 cos t + p sin t for t in [0, duration];
+    at the end of the feasible interval containing the current time the momentum is reflected
+    about the gradient of the primitive whose root ends it. Implementation decisions:
+    - the chains run asynchronously in one batch: a chain that finishes a move starts its next
+      one in the same iteration, so no chain waits for the one with the most bounces;
+    - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
+      0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
+      a window
+      without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
+      which far fewer primitives can vanish per solve);
+    - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
+      infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
+    - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
+    Returns the draws and counters (bounces, rejected moves).
     """
     if not 0 < duration < np.pi:
         raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
     z = np.array(z, dtype=float)
+    c, m = z.shape
+    out = np.empty((c, n_steps, m))
+    done = np.zeros(c, dtype=int)
     start = z.copy()
-    c = len(z)
     p = rng.standard_normal(z.shape)
     left = np.full(c, float(duration))
-    running = np.ones(c, dtype=bool)
-    failed = np.zeros(c, dtype=bool)
-    bounces = 0
-    max_iters = 2 * max_bounces + int(np.ceil(duration / window)) + 1
-    for _ in range(max_iters):
-        idx = np.flatnonzero(running)
+    bounced = np.zeros(c, dtype=int)
+    stats = {"bounces": 0, "rejected": 0}
+    if window is None:
+        window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
+    per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
+    for _ in range(per_move * n_steps):  # every iteration advances each active chain
+        idx = np.flatnonzero(done < n_steps)
         if idx.size == 0:
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
@@ -160,13 +167,26 @@ def hmc_step(
             unit = grad / np.where(norm > 0, norm, 1.0)
             pb = p_new[bounce]
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
-            bounces += int(bounce.sum())
+            stats["bounces"] += int(bounce.sum())
+        bounced[idx] += bounce
+        failed = stuck | (bounced[idx] > max_bounces)
+        finished = failed | (~hit & (dt >= lc))
         z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
-        running[idx[(~hit & (dt >= lc)) | stuck]] = False
-        failed[idx[stuck]] = True
-    failed |= running
-    z[failed] = start[failed]
-    return z, ~failed, bounces
+        fin = idx[finished]
+        if fin.size:
+            rejected = idx[failed]
+            z[rejected] = start[rejected]
+            stats["rejected"] += int(rejected.size)
+            out[fin, done[fin]] = z[fin]
+            done[fin] += 1
+            start[fin] = z[fin]
+            p[fin] = rng.standard_normal((fin.size, m))
+            left[fin] = duration
+            bounced[fin] = 0
+    unfinished = np.flatnonzero(done < n_steps)
+    for ci in unfinished:  # only if the iteration bound was hit: repeat the last state
+        out[ci, done[ci] :] = start[ci]
+    return out, stats
 
 
 def gibbs_sweep(system, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -194,8 +214,55 @@ def mh_step(
     return np.where(accept[:, None], proposal, z), accept
 
 
+class ChainRunner:
+    """Advances a batch of chains with one MCMC method on any constraint system."""
+
+    def __init__(
+        self,
+        system,
+        method: str,
+        rng: np.random.Generator,
+        hmc_duration: float = np.pi / 2,
+        mh_scale: float | None = None,
+    ):
+        if method not in ("hmc", "gibbs", "mh"):
+            raise ValueError(f"unknown MCMC method {method!r}")
+        self.system, self.method, self.rng = system, method, rng
+        self.hmc_duration = hmc_duration
+        self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
+        self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
+
+    def step(self, z: np.ndarray, adapt: bool = False) -> np.ndarray:
+        if self.method == "gibbs":
+            z = gibbs_sweep(self.system, z, self.rng)
+            self.stats["accepted"] += len(z)
+        else:
+            z, accept = mh_step(self.system, z, self.rng, self.scale)
+            self.stats["accepted"] += int(accept.sum())
+            if adapt:  # Robbins-Monro towards 25 % acceptance; burn-in only
+                self.scale *= np.exp(0.5 * (accept.mean() - 0.25))
+        self.stats["proposed"] += len(z)
+        return z
+
+    def run(self, z: np.ndarray, steps: int, thin: int = 1, adapt: bool = False) -> np.ndarray:
+        """States after each of ``steps`` kept steps (``thin`` moves each): (C, steps, m)."""
+        if self.method == "hmc":
+            draws, stats = hmc_chains(self.system, z, steps * thin, self.rng, self.hmc_duration)
+            self.stats["bounces"] += stats["bounces"]
+            moves = draws.shape[0] * draws.shape[1]
+            self.stats["accepted"] += moves - stats["rejected"]
+            self.stats["proposed"] += moves
+            return draws[:, thin - 1 :: thin]
+        out = np.empty((len(z), steps, z.shape[1]))
+        for i in range(steps):
+            for _ in range(thin):
+                z = self.step(z, adapt)
+            out[:, i] = z
+        return out
+
+
 def random_descent(
-    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60
+    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
 
@@ -204,14 +271,16 @@ def random_descent(
     primitive along it (so local columns, e.g. one vertex's depth noise, fix local contacts
     without disturbing the rest). The line is scanned exactly (interval sets) and the state
     jumps to a point, drawn from the prior along the line, of a segment with the fewest violated
-    observations: the count never increases. Stops when every row is feasible.
+    observations: the count never increases. Stops when ``enough`` rows (default all) are
+    feasible.
     """
     z = np.array(z, dtype=float)
     m = z.shape[1]
     count = _violated_count(system, z)
+    enough = len(z) if enough is None else enough
     for _ in range(max_iters):
         todo = np.flatnonzero(count > 0)
-        if todo.size == 0:
+        if len(z) - todo.size >= enough:
             break
         viol = system.violations(system.values(z[todo])) > 0
         pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
@@ -269,7 +338,7 @@ def _contact_projection(
         probe = History(mid[usable], mid[usable] + u[usable], np.ones(usable.sum(), int))
         pairs = np.stack([np.arange(usable.sum()), host[usable]], axis=1)
         system = HistoryConstraints(shape, probe, pairs)
-        prims = system._prim_index[np.arange(len(pairs)), 0]
+        prims = system.primitive_index(np.arange(len(pairs)), 0)
         for _ in range(iters):
             g = system.values(z[c][None])[0, prims]
             jac = system.gradient(np.repeat(z[c][None], len(prims), 0), prims)
@@ -277,23 +346,59 @@ def _contact_projection(
     return z
 
 
-def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
+def default_chains(method: str, n_samples: int) -> int:
+    """Chains when none are given: 16, and for HMC up to 64 so that each chain still yields
+    >= 16 draws. Decision: HMC's cost is dominated by per-bounce numpy calls over the whole
+    batch, so wider batches (fewer bounce iterations per sample) are cheaper per draw, while
+    each chain pays its own burn-in."""
+    if method == "hmc":
+        return int(np.clip(n_samples // 16, 16, 64))
+    return 16
+
+
+def _warm_seeds(shape, history, system, init_z, chains, rng):
+    """Distinct rows of ``init_z`` consistent with the whole history and feasible for the
+    pruned ``system`` (at most ``chains``, in random order), and the rest of ``init_z``."""
+    ok = _consistent_rows(shape, history, init_z)
+    ok[ok] = feasible(system, init_z[ok])
+    good, rest = init_z[ok], init_z[~ok]
+    return good[rng.permutation(len(good))[:chains]], rest[rng.permutation(len(rest))]
+
+
+def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None):
     """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
 
+    Decision: at most SEED_DESCENTS descents run per restart. With that many chains or fewer,
+    every chain gets its own seed; with more, descent stops once half are feasible and the
+    chains share those seeds round-robin (independent HMC momenta separate them within the
+    burn-in; slowly mixing MH / Gibbs should use <= SEED_DESCENTS chains).
+
+    Warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
+    history are used as seeds directly (distinct ones first); if none does, the first descent
+    starts from some of them instead of prior draws (they already satisfy most observations).
+
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
-    Returns (z, system, best_z, best_count) with z None when no restart reached feasibility.
+    Returns (z, system, best_z, best_count, distinct warm seeds used) with z None when no restart
+    reached feasibility.
     """
     pairs = prune_pairs(shape, history, threshold)
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
-    for _ in range(restarts):
+    tries = min(chains, SEED_DESCENTS)
+    warm = np.zeros((0, shape.n_basis))
+    if init_z is not None and len(init_z):
         system = HistoryConstraints(shape, history, pairs)
-        z0 = _contact_projection(shape, history, shape.sample_z(rng, chains))
-        z, count = random_descent(system, z0, rng, max_iters)
+        good, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
+        if len(good):
+            return good[np.arange(chains) % len(good)], system, good[0], 0, len(good)
+    for attempt in range(restarts):
+        system = HistoryConstraints(shape, history, pairs)
+        start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
+        z0 = _contact_projection(shape, history, start)
+        enough = tries if chains <= SEED_DESCENTS else max(1, tries // 2)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
-        if ok.all():
-            return z, system, z, 0
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
         missed = free & np.any(full.pair_violations(z[count == 0]) > 0, axis=0)
@@ -302,14 +407,14 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters):
         if ok.any():
             good = z[ok]
             system = HistoryConstraints(shape, history, pairs)
-            return good[rng.integers(len(good), size=chains)], system, good[0], 0
+            return good[np.arange(chains) % len(good)], system, good[0], 0, 0
         full_count = np.sum(
             observation_violations(shape.closed, shape.vertices(z), history, shape.friction) > 0,
             axis=1,
         )
         if full_count.min() < best_count:
             best_count, best_z = full_count.min(), z[np.argmin(full_count)]
-    return None, None, best_z, best_count
+    return None, None, best_z, best_count, 0
 
 
 def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
@@ -343,7 +448,7 @@ def sample_posterior(
     rng: np.random.Generator,
     method: str = "hmc",
     *,
-    chains: int = 8,
+    chains: int | None = None,
     burn_in: int | None = None,
     thin: int = 1,
     prune_threshold: float = 1e-4,
@@ -353,6 +458,7 @@ def sample_posterior(
     max_draws: int = 2_000_000,
     seed_restarts: int = 8,
     seed_iters: int = 60,
+    init_z: np.ndarray | None = None,
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -360,20 +466,33 @@ def sample_posterior(
     (random walk, step adapted during burn-in), "rejection" (i.i.d. prior draws, at most
     ``max_draws``; may return fewer samples, even none, if the posterior is too unlikely).
 
-    MCMC chains start from seeds found by random descent of f_H. If ``seed_restarts`` descents
+    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from seeds
+    found by random descent of f_H. If ``seed_restarts`` descents
     all fail, the history is taken as inconsistent (sensor error): the observations violated by
     the best state found are dropped (``dropped``) and sampling continues without them. Every
     returned sample satisfies every kept observation under the exact geometric test. An empty
     history returns exact prior draws. ``max_steps`` (default 50 n / chains + 1000) bounds the
     MCMC steps per chain; fewer samples are returned if verification keeps failing.
+
+    Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
+    observations, seeds the chains: its rows consistent with the history (the previous
+    posterior filtered by the new observations, i.e. already draws of the new one) are used
+    directly, and when there are at least ``chains`` distinct ones the default burn-in drops
+    to 1 move (HMC, Gibbs) / 50 steps (MH); otherwise descent starts from its rows.
     """
     start = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
     if int(n_samples) != n_samples or n_samples < 0:
         raise ValueError(f"n_samples must be a non-negative integer, got {n_samples}")
+    if chains is None:
+        chains = default_chains(method, n_samples)
     if chains < 1 or thin < 1:
         raise ValueError("chains and thin must be >= 1")
+    if init_z is not None:
+        init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
+        if not np.all(np.isfinite(init_z)):
+            raise ValueError("init_z must be finite")
     n_samples = int(n_samples)
     dropped = np.zeros(0, dtype=int)
     kept_idx = np.arange(len(history))
@@ -400,8 +519,8 @@ def sample_posterior(
         if len(sub) == 0:
             info["dropped_all"] = True
             return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-        z, system, best_z, _ = _seed(
-            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters
+        z, system, best_z, _, distinct = _seed(
+            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z
         )
         if z is not None:
             break
@@ -417,41 +536,21 @@ def sample_posterior(
         raise RuntimeError("no history-consistent seed found even after dropping observations")
 
     per_chain = -(-n_samples // chains)
-    burn_in = {"hmc": 3, "gibbs": 5, "mh": 200}[method] if burn_in is None else burn_in
+    warm = init_z is not None and distinct >= chains
+    if burn_in is None:
+        burn_in = ({"hmc": 1, "gibbs": 1, "mh": 50} if warm else {"hmc": 3, "gibbs": 5, "mh": 200})[
+            method
+        ]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
-    scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(shape.n_basis)
-    stats = {"bounces": 0, "accepted": 0, "proposed": 0}
-
-    def step(z, adapt=False):
-        nonlocal scale
-        if method == "hmc":
-            z, moved, bounces = hmc_step(system, z, rng, hmc_duration)
-            stats["bounces"] += bounces
-            stats["accepted"] += int(moved.sum())
-        elif method == "gibbs":
-            z = gibbs_sweep(system, z, rng)
-            stats["accepted"] += len(z)
-        else:
-            z, accept = mh_step(system, z, rng, scale)
-            stats["accepted"] += int(accept.sum())
-            if adapt:  # Robbins-Monro towards 25 % acceptance, burn-in only
-                scale *= np.exp(0.5 * (accept.mean() - 0.25))
-        stats["proposed"] += len(z)
-        return z
-
-    for _ in range(burn_in):
-        z = step(z, adapt=True)
+    runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
+    z = runner.run(z, burn_in, adapt=True)[:, -1] if burn_in else z
     chain_draws = [[] for _ in range(chains)]
     steps = 0
     while min(len(c) for c in chain_draws) < per_chain and steps < max_steps:
         need = per_chain - min(len(c) for c in chain_draws)
-        block = []
-        for _ in range(min(need, max_steps - steps)):
-            for _ in range(thin):
-                z = step(z)
-            steps += 1
-            block.append(z)
-        block = np.stack(block, axis=1)  # (C, B, m)
+        count = min(need, max_steps - steps)
+        block = runner.run(z, count, thin=thin)  # (C, B, m)
+        z, steps = block[:, -1], steps + count
         ok = _consistent_rows(shape, sub, block.reshape(-1, shape.n_basis))
         ok = ok.reshape(chains, -1)
         for c in range(chains):  # C is small (a handful of chains)
@@ -466,13 +565,14 @@ def sample_posterior(
     else:
         ess = float(len(z))
     info.update(
-        stats,
+        runner.stats,
         steps=steps,
         burn_in=burn_in,
         pairs=system.n_pairs,
+        warm_seeds=distinct if init_z is not None else 0,
         pairs_total=len(sub) * shape.n_edges,
         verified_fraction=sum(len(c) for c in chain_draws) / max(steps * chains, 1),
     )
     if method == "mh":
-        info["mh_scale"] = float(scale)
+        info["mh_scale"] = float(runner.scale)
     return PosteriorSamples(z, vertices, method, ess, time.perf_counter() - start, dropped, info)

@@ -1,0 +1,176 @@
+"""Free space of the docking planner (paper Sec. V-B, Fig. 12): the likely-obstacle region,
+clearance ascent away from the mean shape, and a lazy visibility-graph shortest path.
+
+The likely-obstacle region (LOR) is the union of the convex hulls of each edge's endpoint
+samples; its complement, the unlikely-obstacle region (UOR), is free space for the path prefix.
+Decisions where the paper is silent:
+- the LOR is grown by ``margin`` metres (the planner passes half the contact resolution) so
+  that degenerate hulls (few or identical samples) still have an area and paths keep a gap;
+- for an open terrain profile the mean solid (the mean polyline closed by the straight segment
+  from its last to its first vertex) is an obstacle too, so a shortest path cannot sneak round
+  the profile's ends into the rock;
+- the obstacle outline is simplified (after growing by the simplification tolerance, so it
+  stays conservative) to keep the visibility graph small.
+"""
+
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+import shapely
+
+# Distance (metres) the obstacle outline may move under simplification.
+_SIMPLIFY_TOLERANCE = 0.002
+# The search box extends this far (metres) beyond the obstacles and the start.
+_BOX_MARGIN = 0.1
+
+
+def likely_obstacle_region(samples: np.ndarray, edges: np.ndarray, margin: float):
+    """Union of each edge's convex hull over the samples, grown by ``margin`` (shapely geometry).
+
+    Args:
+        samples: (N, n, 2) vertex samples.
+        edges: (E, 2) vertex index pairs.
+        margin: growth in metres (> 0 keeps single-sample hulls 2-D).
+    """
+    samples = np.asarray(samples, float)
+    if samples.ndim != 3 or samples.shape[0] < 1 or samples.shape[2] != 2:
+        raise ValueError(f"samples must be (N >= 1, n, 2), got {samples.shape}")
+    if not np.all(np.isfinite(samples)):
+        raise ValueError("samples must be finite")
+    points = samples[:, edges, :]  # (N, E, 2, 2)
+    points = np.moveaxis(points, 1, 0).reshape(len(edges), -1, 2)  # (E, 2N, 2)
+    hulls = shapely.convex_hull(shapely.multipoints(points))
+    return shapely.buffer(shapely.union_all(hulls), margin, quad_segs=2)
+
+
+def solid_region(mean_vertices: np.ndarray, closed: bool):
+    """The mean shape's solid as a polygon, or None when the closed outline is not simple."""
+    polygon = shapely.Polygon(np.asarray(mean_vertices, float))
+    if not closed:
+        polygon = shapely.make_valid(polygon)
+    return polygon if polygon.is_valid and polygon.area > 0 else None
+
+
+class FreeSpace:
+    """Obstacles = LOR (+ mean solid); clearance is the distance to the mean shape's outline."""
+
+    def __init__(self, lor, mean_vertices: np.ndarray, closed: bool, start: np.ndarray):
+        mean_vertices = np.asarray(mean_vertices, float)
+        self.outline = (shapely.LinearRing if closed else shapely.LineString)(mean_vertices)
+        solid = solid_region(mean_vertices, closed)
+        obstacles = lor if solid is None else shapely.union(lor, solid)
+        obstacles = shapely.simplify(
+            shapely.buffer(obstacles, _SIMPLIFY_TOLERANCE, quad_segs=2), _SIMPLIFY_TOLERANCE
+        )
+        shapely.prepare(obstacles)
+        self.obstacles = obstacles
+        x0, y0, x1, y1 = obstacles.bounds
+        sx, sy = np.asarray(start, float)
+        m = _BOX_MARGIN
+        box = shapely.box(min(x0, sx) - m, min(y0, sy) - m, max(x1, sx) + m, max(y1, sy) + m)
+        self.free = shapely.difference(box, obstacles)
+        shapely.prepare(self.free)
+        shapely.prepare(self.outline)
+        self.nodes = _convex_corners(obstacles)
+
+    def blocked(self, points: np.ndarray) -> np.ndarray:
+        """(k,) whether each point (k, 2) lies in an obstacle (inclusive of its boundary)."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        return shapely.intersects_xy(self.obstacles, p[:, 0], p[:, 1])
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """(k,) distance in metres from each point (k, 2) to the mean shape's outline."""
+        p = np.asarray(points, float).reshape(-1, 2)
+        return shapely.distance(self.outline, shapely.points(p))
+
+    def touches_outline(self, path: np.ndarray) -> bool:
+        """Whether the polyline (L, 2) meets the mean shape's outline (L = 1: the point)."""
+        path = np.asarray(path, float).reshape(-1, 2)
+        geometry = shapely.Point(path[0]) if len(path) == 1 else shapely.LineString(path)
+        return bool(shapely.intersects(self.outline, geometry))
+
+    def visible(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether the straight segment a->b stays in free space."""
+        return bool(shapely.covered_by(shapely.LineString([a, b]), self.free))
+
+    def ascend(self, p: np.ndarray, step: float, max_steps: int = 400) -> np.ndarray | None:
+        """Path from ``p`` out of the obstacles with strictly increasing clearance ([36] of the paper).
+
+        Steps of ``step`` metres directly away from the nearest point of the mean outline.
+        Returns (L, 2) points starting at ``p`` and ending in free space, or None when the
+        clearance stops increasing (a pocket's medial axis) or after ``max_steps`` steps.
+        """
+        path = [np.asarray(p, float)]
+        for _ in range(max_steps):
+            here = path[-1]
+            if not self.blocked(here)[0]:
+                return np.array(path)
+            nearest = np.asarray(shapely.shortest_line(self.outline, shapely.Point(here)).coords)
+            away = nearest[1] - nearest[0]
+            norm = np.linalg.norm(away)
+            if norm < 1e-12:
+                return None  # on the outline: no direction of increasing clearance
+            ahead = here + step * away / norm
+            if self.clearance(ahead)[0] <= norm:
+                return None
+            path.append(ahead)
+        return None
+
+    def shortest_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        """Shortest free path start -> goal through the obstacles' corners (lazy A*).
+
+        The visibility graph is never built: every corner is a candidate successor, and a
+        segment's visibility is checked only when A* pops it (lazy edge evaluation), so only the
+        segments on or near the optimal path are tested. Returns (L, 2) or None.
+        """
+        start, goal = np.asarray(start, float), np.asarray(goal, float)
+        if self.visible(start, goal):
+            return np.array([start, goal])
+        nodes = np.vstack([self.nodes, start, goal])
+        i_start, i_goal = len(nodes) - 2, len(nodes) - 1
+        h = np.linalg.norm(nodes - goal, axis=1)
+        g_best = np.full(len(nodes), np.inf)
+        parent = np.full(len(nodes), -1)
+        closed = np.zeros(len(nodes), bool)
+        queue = [(h[i_start], 0.0, i_start, -1)]
+        # Each (parent, node) pair is pushed at most once: bounded by len(nodes)^2 pops.
+        while queue:
+            _, g, v, u = heapq.heappop(queue)
+            if closed[v] or (u >= 0 and not self.visible(nodes[u], nodes[v])):
+                continue
+            closed[v], g_best[v], parent[v] = True, g, u
+            if v == i_goal:
+                break
+            step = np.linalg.norm(nodes - nodes[v], axis=1)
+            for w in np.flatnonzero(~closed & (g + step < g_best)):
+                g_best[w] = g + step[w]
+                heapq.heappush(queue, (g_best[w] + h[w], g_best[w], int(w), int(v)))
+        if not closed[i_goal]:
+            return None
+        order = [i_goal]
+        while parent[order[-1]] >= 0:
+            order.append(parent[order[-1]])
+        return nodes[order[::-1]]
+
+
+def _convex_corners(obstacles) -> np.ndarray:
+    """(K, 2) ring vertices where the obstacle's interior angle is below 180 degrees.
+
+    Shortest paths around polygonal obstacles only bend at such corners. Rings are oriented
+    so the obstacle lies on the left (exterior CCW, holes CW); a left turn is a convex corner.
+    """
+    oriented = shapely.orient_polygons(obstacles)
+    rings = [
+        *shapely.get_exterior_ring(shapely.get_parts(oriented)),
+        *[r for poly in shapely.get_parts(oriented) for r in poly.interiors],
+    ]
+    corners = []
+    for ring in rings:  # a few rings per region, each vectorized
+        c = np.asarray(ring.coords)[:-1]
+        prev, nxt = np.roll(c, 1, axis=0), np.roll(c, -1, axis=0)
+        e1, e2 = c - prev, nxt - c
+        turn = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        corners.append(c[turn > 0])
+    return np.vstack(corners) if corners else np.zeros((0, 2))

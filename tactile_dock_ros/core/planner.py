@@ -1,0 +1,306 @@
+"""Docking planner (paper Sec. V-B): the best guarded move under the posterior, or give up.
+
+A plan is a polyline whose last segment is the loading move: it travels along ``load`` (the
+direction the robot pushes, the paper's -f_load) through the expected midpoint of a target edge
+(the edge's *optimal terminal segment*). The prefix leaves the likely-obstacle region with
+increasing clearance from the mean shape and reaches the tool through the unlikely-obstacle
+region by a visibility-graph shortest path (``core.freespace``).
+
+Objective (eq. 24): J = P_dock * B(min_p' |aim - aim'| / w), B(z) = 1 - exp(-z), where aim is
+the terminal segment's target point (the expected edge midpoint), aim' those of earlier plans,
+and w the contact resolution. P_dock comes from the probabilistic simulation
+(``probsim.dock_probability``) of the terminal segment under the moment-fit Gaussian of the
+posterior samples.
+
+Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
+its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
+planned lazily in order of decreasing J and the first that succeeds is optimal. This is the
+paper's pruning taken to its end: an edge whose J (or P_dock) is below the best found so far is
+never path-planned, and since edges are visited best-first no later edge can improve on the
+first success. The paper visits edges by P(C_e, K_e); visiting by J itself needs no extra
+estimate and plans at most as many prefixes.
+
+Baselines (Sec. VI-A) share everything but the score: ``greedy`` = P_dock; ``window`` (GW) =
+the untried site nearest the first site tried; ``info_gain`` (IG) = entropy of the predicted
+stopping feature (decision documented in ``score``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import probsim
+from .freespace import FreeSpace, likely_obstacle_region
+from .shape import GaussianShape
+
+OBJECTIVES = ("ours", "greedy", "window", "info_gain")
+# An edge faces the load when the push has at least this component against its outward normal.
+_MIN_FACING = 0.05
+# Longest search along a terminal segment's backward ray, in ray steps.
+_MAX_RAY_STEPS = 400
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Optimal terminal segment of every edge facing the load (arrays indexed like ``edges``).
+
+    Attributes:
+        edges: (C,) target edge indices.
+        aim: (C, 2) expected edge midpoints, metres.
+        start: (C, 2) where the loading move starts.
+        end: (C, 2) where it ends (past every sample of the edge).
+        needs_exit: (C,) whether ``start`` is still inside the LOR (clearance ascent needed).
+        p_dock: (C,) docking probability of the loading move (probsim).
+        entropy: (C,) entropy in nats of the predicted stopping feature (IG score).
+    """
+
+    edges: np.ndarray
+    aim: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    needs_exit: np.ndarray
+    p_dock: np.ndarray
+    entropy: np.ndarray
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Planner decision. On ``give_up`` the path is empty and ``target_edge`` is -1."""
+
+    decision: str  # "dock" | "give_up"
+    path: np.ndarray  # (L, 2) waypoints; the last segment is the loading move
+    p_dock: float
+    objective: float
+    target_edge: int
+    reason: str
+    target_point: np.ndarray  # (2,) aimed-at expected edge midpoint (NaN on give-up)
+    candidates: Candidates | None = None
+
+
+def exploration_bonus(aim: np.ndarray, previous: np.ndarray, width: float) -> np.ndarray:
+    """B(min_p' d / w) of eq. (24) for aim points (C, 2) against earlier ones (k, 2)."""
+    aim = np.asarray(aim, float).reshape(-1, 2)
+    previous = np.asarray(previous, float).reshape(-1, 2)
+    if len(previous) == 0:
+        return np.ones(len(aim))
+    if width <= 0:
+        return np.ones(len(aim))  # w = 0 is the greedy limit of eq. (24)
+    d = np.linalg.norm(aim[:, None, :] - previous[None, :, :], axis=2).min(axis=1)
+    return 1.0 - np.exp(-d / width)
+
+
+def terminal_segments(
+    samples: np.ndarray,
+    edges: np.ndarray,
+    load: np.ndarray,
+    space: FreeSpace,
+    step: float,
+) -> dict[str, np.ndarray]:
+    """Optimal terminal segment of every edge facing ``load`` (all edges at once).
+
+    Each aims at the edge's expected midpoint along ``load``. Going backward (along -load) from
+    the aim, the start is the first ray point outside the LOR provided the clearance from the
+    mean shape increased all the way; otherwise it is the last point where it still increased
+    (``needs_exit``: the prefix continues out of the LOR by clearance ascent). The end lies
+    ``2 step`` beyond the farthest sample of the edge along ``load``, so the move reaches the
+    edge wherever the samples put it. Edges whose ray never gains clearance are dropped.
+    """
+    mean = samples.mean(axis=0)
+    c, d = mean[edges[:, 0]], mean[edges[:, 1]]
+    tangent = d - c
+    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)  # outward: right of travel
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    facing = normal @ load < -_MIN_FACING
+    idx = np.flatnonzero(facing)
+    aim = 0.5 * (c[idx] + d[idx])
+    x0, y0, x1, y1 = space.free.bounds
+    reach = np.hypot(x1 - x0, y1 - y0)
+    t = step * np.arange(1, min(_MAX_RAY_STEPS, int(np.ceil(reach / step))) + 1)
+    ray = aim[:, None, :] - t[None, :, None] * load  # (C, K, 2)
+    blocked = space.blocked(ray.reshape(-1, 2)).reshape(ray.shape[:2])
+    clear = space.clearance(ray.reshape(-1, 2)).reshape(ray.shape[:2])
+    gaining = np.diff(np.concatenate([np.zeros((len(idx), 1)), clear], axis=1), axis=1) > 0
+    k_stall = np.where(gaining.all(axis=1), len(t), np.argmin(gaining, axis=1))
+    k_free = np.where((~blocked).any(axis=1), np.argmin(blocked, axis=1), len(t))
+    exits = k_free < k_stall
+    k_start = np.where(exits, k_free, k_stall - 1)
+    ok = k_start >= 0
+    rows = np.arange(len(idx))
+    start = ray[rows, np.maximum(k_start, 0)]
+    ends = samples[:, edges[idx]]  # (N, C, 2, 2): both endpoint samples of each edge
+    along = np.einsum("sjkd,d->sjk", ends - aim[None, :, None, :], load)
+    reach_past = np.maximum(along.max(axis=(0, 2)), 0.0)
+    end = aim + (reach_past + 2 * step)[:, None] * load
+    return {
+        "edges": idx[ok],
+        "aim": aim[ok],
+        "start": start[ok],
+        "end": end[ok],
+        "needs_exit": ~exits[ok],
+    }
+
+
+def evaluate(
+    posterior: GaussianShape,
+    segments: dict[str, np.ndarray],
+    load: np.ndarray,
+    compliant: bool,
+) -> Candidates:
+    """P_dock and stop-feature entropy of each terminal segment (steps 3-4 of Sec. V-B).
+
+    One ``probsim.dock_probability`` call per candidate (the contract takes one path; each is
+    O(n)), so this loop over edges is bounded by E.
+    """
+    p_dock = np.zeros(len(segments["edges"]))
+    entropy = np.zeros(len(segments["edges"]))
+    for j, (a, b) in enumerate(zip(segments["start"], segments["end"], strict=True)):
+        estimate = probsim.dock_probability(posterior, np.array([a, b]), load, compliant)
+        stops = np.concatenate([estimate.p_stop_vertex, estimate.p_stop_edge])
+        outcome = np.clip(np.append(stops, 1.0 - stops.sum()), 0.0, 1.0)
+        p_dock[j] = float(estimate.p_dock)
+        entropy[j] = -np.sum(outcome * np.log(np.where(outcome > 0, outcome, 1.0)))
+    return Candidates(**segments, p_dock=p_dock, entropy=entropy)
+
+
+def score(
+    candidates: Candidates,
+    objective: str,
+    previous_targets: np.ndarray,
+    width: float,
+    give_up_threshold: float,
+) -> np.ndarray:
+    """(C,) planning score; candidates scoring 0 are never planned.
+
+    - ``ours``: eq. (24), P_dock * B(min d / w).
+    - ``greedy``: P_dock (eq. 24 with w = 0).
+    - ``window`` (GW, Sec. VI-A): the first plan takes the best P_dock; later plans take the
+      untried site (no earlier aim within w) nearest to that first site among sites with
+      P_dock >= the give-up threshold; score 1 / (1 + distance / w).
+    - ``info_gain`` (IG probe, Sec. VI-A): the paper does not define the gain; we use the
+      entropy (nats) of the predicted outcome, i.e. which feature the move sticks at, or none.
+    """
+    previous = np.asarray(previous_targets, float).reshape(-1, 2)
+    if objective == "ours":
+        return candidates.p_dock * exploration_bonus(candidates.aim, previous, width)
+    if objective == "greedy" or (objective == "window" and len(previous) == 0):
+        return candidates.p_dock
+    if objective == "window":
+        untried = exploration_bonus(candidates.aim, previous, width) > 1.0 - np.exp(-1.0)
+        distance = np.linalg.norm(candidates.aim - previous[0], axis=1)
+        eligible = untried & (candidates.p_dock >= give_up_threshold)
+        return np.where(eligible, 1.0 / (1.0 + distance / width), 0.0)
+    if objective == "info_gain":
+        return candidates.entropy
+    raise ValueError(f"unknown objective {objective!r}; choose from {OBJECTIVES}")
+
+
+def _give_up(reason: str, candidates: Candidates | None = None) -> Plan:
+    return Plan("give_up", np.zeros((0, 2)), 0.0, 0.0, -1, reason, np.full(2, np.nan), candidates)
+
+
+def _check_inputs(samples, shape, start, load, friction, contact_resolution, threshold):
+    if samples.ndim != 3 or samples.shape[1:] != (shape.n_vertices, 2) or len(samples) < 2:
+        raise ValueError(
+            f"samples must be (N >= 2, {shape.n_vertices}, 2) for this shape, got {samples.shape}"
+        )
+    if not np.all(np.isfinite(samples)):
+        raise ValueError("samples must be finite")
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise ValueError(f"start must be a finite 2-vector, got {start}")
+    if load.shape != (2,) or not np.all(np.isfinite(load)) or np.linalg.norm(load) < 1e-12:
+        raise ValueError(f"load must be a finite nonzero 2-vector, got {load}")
+    if not (np.isfinite(friction) and friction >= 0):
+        raise ValueError(f"friction must be finite and >= 0, got {friction}")
+    if not (np.isfinite(contact_resolution) and contact_resolution > 0):
+        raise ValueError(f"contact_resolution must be > 0 metres, got {contact_resolution}")
+    if not (0 <= threshold < 1):
+        raise ValueError(f"give_up_threshold must be in [0, 1), got {threshold}")
+
+
+def plan(
+    samples: np.ndarray,
+    shape: GaussianShape,
+    history=None,
+    start: np.ndarray = (0.0, 0.0),
+    load: np.ndarray = (0.0, -1.0),
+    friction: float = 0.5,
+    contact_resolution: float = 0.01,
+    previous_targets: np.ndarray = (),
+    give_up_threshold: float = 1e-3,
+    *,
+    objective: str = "ours",
+    compliant: bool = True,
+    max_path_attempts: int = 20,
+) -> Plan:
+    """Best docking plan for posterior vertex samples (N, n, 2), or a give-up (Sec. V-B).
+
+    Args:
+        samples: posterior vertex samples; their moment fit is the Gaussian of the estimate.
+        shape: prior (topology: ``closed``, edges; vertex count).
+        history: the observations the samples are conditioned on. The samples already carry
+            them, so the planner does not read it (kept for the contract's signature).
+        start: current tool position, metres.
+        load: unit push direction of the loading move (normalized here).
+        friction: Coulomb coefficient.
+        contact_resolution: w of eq. (24), metres; also the planner's step and LOR margin scale.
+        previous_targets: (k, 2) aim points of earlier plans (eq. 24's P).
+        give_up_threshold: give up when the best P_dock over all edges is below it.
+        objective: one of ``OBJECTIVES`` (see ``score``).
+        compliant: motion model of the probabilistic simulation.
+        max_path_attempts: at most this many candidates are path-planned before giving up.
+
+    Raises ValueError on malformed input; an infeasible situation is a give-up with a reason.
+    """
+    samples = np.asarray(samples, float)
+    start = np.asarray(start, float).reshape(-1)
+    load = np.asarray(load, float).reshape(-1)
+    _check_inputs(samples, shape, start, load, friction, contact_resolution, give_up_threshold)
+    load = load / np.linalg.norm(load)
+    step = 0.5 * contact_resolution
+    lor = likely_obstacle_region(samples, shape.edges, margin=step)
+    space = FreeSpace(lor, samples.mean(axis=0), shape.closed, start)
+    segments = terminal_segments(samples, shape.edges, load, space, step)
+    if len(segments["edges"]) == 0:
+        return _give_up("no edge of the shape faces the load direction")
+    posterior = GaussianShape.from_samples(samples, shape.closed, friction)
+    candidates = evaluate(posterior, segments, load, compliant)
+    best = float(candidates.p_dock.max())
+    if best < give_up_threshold:
+        return _give_up(
+            f"best docking probability {best:.2e} < threshold {give_up_threshold:g}", candidates
+        )
+    lead = np.array([start])
+    if space.blocked(start)[0]:
+        lead = space.ascend(start, step)
+        if lead is None:
+            return _give_up("the tool is inside the likely-obstacle region with no way out")
+    values = score(candidates, objective, previous_targets, contact_resolution, give_up_threshold)
+    order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
+    for j in order[:max_path_attempts]:
+        tail = candidates.start[j : j + 1]
+        if candidates.needs_exit[j]:
+            exit_path = space.ascend(candidates.start[j], step)
+            if exit_path is None:
+                continue
+            tail = exit_path[::-1]
+        middle = space.shortest_path(lead[-1], tail[0])
+        if middle is None:
+            continue
+        path = np.vstack([lead[:-1], middle, tail[1:], candidates.end[j]])
+        if space.touches_outline(path[:-1]):
+            continue
+        return Plan(
+            "dock",
+            path,
+            float(candidates.p_dock[j]),
+            float(values[j]),
+            int(candidates.edges[j]),
+            f"{objective}: edge {candidates.edges[j]} with P_dock {candidates.p_dock[j]:.3f}",
+            candidates.aim[j],
+            candidates,
+        )
+    if not order:
+        return _give_up(f"no candidate site scores above 0 under {objective!r}", candidates)
+    return _give_up("no collision-free prefix to any promising docking site", candidates)

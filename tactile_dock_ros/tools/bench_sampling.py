@@ -1,0 +1,193 @@
+"""Posterior sampling benchmark (paper Fig. 9): EST = seconds / ESS of rejection, MH, Gibbs and
+HMC on three Sloper problems of increasing restriction and on three_ledges after 10 probes, plus
+our HMC against the PyPI package tmg-hmc on a Brownian bridge constrained to y <= 0.
+
+Every number is a median over --repeats runs with different seeds (chains per method: CHAINS).
+Wall times include pruning, seeding and verification. ESS is the autocorrelation-based
+effective sample size, minimum over vertex coordinates (independent draws for rejection).
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+from tactile_dock_ros.core.constraint_systems import LinearConstraints
+from tactile_dock_ros.core.constraints import history_consistent
+from tactile_dock_ros.core.ess import effective_sample_size
+from tactile_dock_ros.core.sampling import METHODS, ChainRunner, sample_posterior
+from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
+
+# HMC decorrelates within a move, so many chains share few seeds (None: the default, 16 to 64
+# by sample count); the slowly mixing MH and Gibbs chains each get their own seed
+# (SEED_DESCENTS = 4), or their ESS would be inflated.
+CHAINS = {"hmc": None, "gibbs": 4, "mh": 4, "rejection": 1}
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--samples", type=int, default=1000, help="samples per Sloper run")
+    parser.add_argument(
+        "--ledges-samples", type=int, default=200, help="samples per three_ledges run"
+    )
+    parser.add_argument(
+        "--max-draws", type=int, default=2_000_000, help="rejection-sampling draw budget"
+    )
+    parser.add_argument(
+        "--ledges-max-draws", type=int, default=100_000, help="rejection budget, three_ledges"
+    )
+    parser.add_argument(
+        "--fraction-draws", type=int, default=400_000, help="prior draws to measure P(H)"
+    )
+    parser.add_argument("--bridge-points", type=int, default=50, help="bridge interior points")
+    parser.add_argument("--bridge-samples", type=int, default=1000, help="bridge samples")
+    parser.add_argument(
+        "--skip-tmg", action="store_true", help="skip the tmg-hmc comparison (not installed)"
+    )
+
+
+def _median(values):
+    finite = [v for v in values if np.isfinite(v)]
+    return statistics.median(finite) if finite else float("inf")
+
+
+def _prior_fraction(problem, history, draws, rng) -> float:
+    shape = problem.prior
+    hits = 0
+    for start in range(0, draws, 50_000):  # bounded memory
+        z = shape.sample_z(rng, min(50_000, draws - start))
+        hits += int(history_consistent(False, shape.vertices(z), history, shape.friction).sum())
+    return hits / draws
+
+
+def _run_problem(name, problem, history, n_samples, args, methods, max_draws) -> dict:
+    fraction = _prior_fraction(problem, history, args.fraction_draws, np.random.default_rng(0))
+    print(f"\n{name}: {len(history)} segments, prior feasible fraction {100 * fraction:.3f} %")
+    print(f"{'method':>10} {'samples':>8} {'seconds':>9} {'ESS':>8} {'EST ms':>9} {'ESS/s':>8}")
+    rows = {}
+    for method in methods:
+        runs = []
+        for rep in range(args.repeats):
+            rng = np.random.default_rng(args.seed + 1000 * rep + 17)
+            out = sample_posterior(
+                problem.prior,
+                history,
+                n_samples,
+                rng,
+                method,
+                max_draws=max_draws,
+                chains=CHAINS[method],
+            )
+            assert history_consistent(False, out.vertices, history, problem.friction).all()
+            runs.append(
+                {
+                    "samples": len(out.z),
+                    "seconds": out.seconds,
+                    "ess": out.ess if len(out.z) else 0.0,
+                    "est": out.est if len(out.z) else float("inf"),
+                    "info": {k: v for k, v in out.info.items() if np.isscalar(v)},
+                }
+            )
+        med = {key: _median([r[key] for r in runs]) for key in ("samples", "seconds", "ess", "est")}
+        rate = med["ess"] / med["seconds"] if med["seconds"] > 0 else 0.0
+        rows[method] = {"median": {**med, "ess_per_second": rate}, "runs": runs}
+        print(
+            f"{method:>10} {med['samples']:>8.0f} {med['seconds']:>9.3f} {med['ess']:>8.1f} "
+            f"{1e3 * med['est']:>9.2f} {rate:>8.1f}"
+        )
+    return {"segments": len(history), "prior_fraction": fraction, "methods": rows}
+
+
+def brownian_bridge(n: int, sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Covariance square root S (n, n) of a Brownian bridge at n interior points of [0, 1] and
+    those points; the occlusion prior of Sec. III-A1 before the y <= 0 constraint."""
+    s = np.arange(1, n + 1) / (n + 1)
+    cov = sigma**2 * (np.minimum.outer(s, s) - np.outer(s, s))
+    eigval, eigvec = np.linalg.eigh(cov)
+    return (eigvec * np.sqrt(eigval)) @ eigvec.T, s  # symmetric root (tmg-hmc requires it)
+
+
+def _bridge(args) -> dict:
+    """Our HMC (1 and 8 chains) and tmg-hmc on the bridge under y <= 0: ESS per second."""
+    root, s = brownian_bridge(args.bridge_points)
+    system = LinearConstraints(root, np.zeros(len(s)))  # y = S z <= 0
+    n, burn = args.bridge_samples, 20
+    start = -np.sqrt(s * (1 - s))  # one standard deviation below the line: feasible
+    z0 = np.linalg.solve(root, start)
+    print(f"\nBrownian bridge, {len(s)} points, y <= 0: {n} samples, burn-in {burn}")
+    print(f"{'sampler':>16} {'seconds':>9} {'ESS':>8} {'ESS/s':>9}")
+    results = {}
+    samplers = {"ours_1_chain": 1, "ours_8_chains": 8}
+    for name, chains in samplers.items():
+        runs = []
+        for rep in range(args.repeats):
+            rng = np.random.default_rng(args.seed + rep)
+            t0 = time.perf_counter()
+            runner = ChainRunner(system, "hmc", rng)
+            z = runner.run(np.tile(z0, (chains, 1)), burn)[:, -1]
+            y = runner.run(z, -(-n // chains)) @ root.T
+            seconds = time.perf_counter() - t0
+            assert np.all(y <= 1e-9)
+            ess = float(effective_sample_size(y).min())
+            runs.append({"seconds": seconds, "ess": ess, "ess_per_second": ess / seconds})
+        results[name] = runs
+    if not args.skip_tmg:
+        from tmg_hmc import TMGSampler
+
+        runs = []
+        for rep in range(args.repeats):
+            rng = np.random.default_rng(args.seed + rep)
+            t0 = time.perf_counter()
+            sampler = TMGSampler(np.zeros(len(s)), Sigma_half=root)
+            for i in range(len(s)):
+                sampler.add_constraint(f=-np.eye(len(s))[:, i : i + 1], c=0.0)
+            # seeded momenta instead of the package's global np.random state
+            sampler.sample_xdot = lambda rng=rng: rng.standard_normal((len(s), 1))
+            y = sampler.sample(start, n_samples=n, burn_in=burn)
+            seconds = time.perf_counter() - t0
+            assert np.all(y <= 1e-9)
+            ess = float(effective_sample_size(y).min())
+            runs.append({"seconds": seconds, "ess": ess, "ess_per_second": ess / seconds})
+        results["tmg_hmc"] = runs
+    summary = {}
+    for name, runs in results.items():
+        med = {k: _median([r[k] for r in runs]) for k in ("seconds", "ess", "ess_per_second")}
+        summary[name] = {"median": med, "runs": runs}
+        print(f"{name:>16} {med['seconds']:>9.3f} {med['ess']:>8.1f} {med['ess_per_second']:>9.1f}")
+    if "tmg_hmc" in summary:
+        for name in samplers:
+            ratio = (
+                summary[name]["median"]["ess_per_second"]
+                / summary["tmg_hmc"]["median"]["ess_per_second"]
+            )
+            summary[name]["ess_per_second_ratio_to_tmg_hmc"] = ratio
+            print(f"  {name}: ESS/s ratio to tmg-hmc = {ratio:.2f}")
+    return summary
+
+
+def run(args) -> dict:
+    print("Posterior sampling benchmark (wall times on this machine; medians over repeats)")
+    problems_out = {}
+    for index in (1, 2, 3):
+        problem, history = fig9_problem(index)
+        problems_out[f"fig9_problem{index}"] = _run_problem(
+            f"Fig. 9 problem {index} (sloper)",
+            problem,
+            history,
+            args.samples,
+            args,
+            METHODS,
+            args.max_draws,
+        )
+    problem, history, _ = three_ledges_after_probes(10, seed=args.seed)
+    problems_out["three_ledges_10_probes"] = _run_problem(
+        "three_ledges after 10 probes",
+        problem,
+        history,
+        args.ledges_samples,
+        args,
+        METHODS,
+        args.ledges_max_draws,
+    )
+    return {"problems": problems_out, "bridge": _bridge(args)}

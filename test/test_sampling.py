@@ -1,0 +1,190 @@
+"""Samplers: feasibility of every sample, distribution correctness, fallbacks, ESS."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.constraint_systems import LinearConstraints
+from tactile_dock_ros.core.constraints import history_consistent
+from tactile_dock_ros.core.ess import effective_sample_size
+from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.sampling import ChainRunner, sample_posterior
+from tactile_dock_ros.core.sampling_problems import probe_history
+
+
+@pytest.fixture(scope="module")
+def sloper_case():
+    problem = problems.get("sloper")
+    truth = problem.sample_ground_truth(np.random.default_rng(1))
+    history = probe_history(problem, truth, [-0.2, 0.1])
+    assert history_consistent(False, truth[None], history, problem.friction)[0]
+    return problem, history
+
+
+@pytest.mark.parametrize("method", ["hmc", "gibbs", "mh"])
+def test_half_plane_truncation_moments(method):
+    """z ~ N(0, I_3) given w.z >= 1: w.z has the truncated-normal moments, the rest N(0, 1)."""
+    w = np.array([1.0, 2.0, -2.0]) / 3.0
+    system = LinearConstraints(-w[None], np.array([1.0]))
+    rng = np.random.default_rng(7)
+    runner = ChainRunner(system, method, rng)
+    z = np.tile(2 * w, (8, 1))
+    runner.run(z, 200 if method == "mh" else 20, adapt=True)
+    z = np.tile(2 * w, (8, 1))
+    steps = {"hmc": 250, "gibbs": 400, "mh": 3000}[method]
+    draws = runner.run(runner.run(z, 50)[:, -1], steps)  # (8, steps, 3)
+    s = draws @ w
+    assert np.all(s >= 1 - 1e-9)
+    mean_ref = stats.norm.pdf(1) / stats.norm.sf(1)
+    var_ref = 1 + mean_ref - mean_ref**2
+    ess = effective_sample_size(s[..., None])[0]
+    assert ess > 100
+    assert abs(s.mean() - mean_ref) < 4.5 * np.sqrt(var_ref / ess)
+    assert abs(s.var() - var_ref) < 4.5 * var_ref * np.sqrt(2 / ess) + 0.01
+    ortho = draws - s[..., None] * w
+    assert abs(np.mean(np.sum(ortho**2, axis=-1)) - 2.0) < 0.25  # two free unit directions
+
+
+def test_every_sample_of_every_sampler_is_consistent(sloper_case):
+    problem, history = sloper_case
+    for method in ["rejection", "mh", "gibbs", "hmc"]:
+        out = sample_posterior(problem.prior, history, 60, np.random.default_rng(3), method)
+        assert out.z.shape == (60, problem.prior.n_basis) and out.method == method
+        assert np.allclose(out.vertices, problem.prior.vertices(out.z))
+        assert history_consistent(False, out.vertices, history, problem.friction).all()
+        assert out.ess > 0 and out.seconds > 0 and out.est == out.seconds / out.ess
+        assert len(out.dropped) == 0
+
+
+def test_samplers_agree_with_rejection_on_vertex_means(sloper_case):
+    problem, history = sloper_case
+    runs = {
+        "rejection": sample_posterior(
+            problem.prior, history, 1500, np.random.default_rng(0), "rejection"
+        ),
+        "hmc": sample_posterior(problem.prior, history, 800, np.random.default_rng(1), "hmc"),
+        "gibbs": sample_posterior(problem.prior, history, 800, np.random.default_rng(2), "gibbs"),
+    }
+    runs["hmc_warm"] = sample_posterior(
+        problem.prior, history, 800, np.random.default_rng(3), init_z=runs["gibbs"].z
+    )
+    assert runs["hmc_warm"].info["burn_in"] == 1
+    ref = runs["rejection"]
+    assert len(ref.z) == 1500
+    ref_x = ref.vertices.reshape(len(ref.z), -1)
+    prior_x = problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(9), 4000))
+    shift = np.abs(ref_x.mean(0) - prior_x.reshape(4000, -1).mean(0)).max()
+    for name in ["hmc", "gibbs", "hmc_warm"]:
+        x = runs[name].vertices.reshape(len(runs[name].z), -1)
+        var = ref_x.var(0) + 1e-12
+        tol = 5 * np.sqrt(var / ref.ess + x.var(0) / runs[name].ess)
+        assert np.all(np.abs(x.mean(0) - ref_x.mean(0)) <= tol), name
+        assert np.max(tol) < shift  # the test can tell the posterior from the prior
+
+
+def test_inconsistent_history_drops_the_offending_observation(sloper_case):
+    problem, history = sloper_case
+    contact = history.a[1], history.b[1]
+    mid = 0.5 * (contact[0] + contact[1])
+    # a free move straight through the felt contact point: no shape satisfies both
+    up = np.array([0.0, 0.2])
+    bad = history.extend([mid + up], [mid - up], [Status.FREE])
+    assert not history_consistent(
+        False,
+        problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(0), 2000)),
+        bad,
+        problem.friction,
+    ).any()
+    out = sample_posterior(problem.prior, bad, 30, np.random.default_rng(5), "hmc", seed_restarts=3)
+    assert len(out.dropped) >= 1
+    kept = np.setdiff1d(np.arange(len(bad)), out.dropped)
+    assert history_consistent(False, out.vertices, bad.subset(kept), problem.friction).all()
+    assert len(out.z) == 30
+
+
+def test_empty_history_and_trivial_requests():
+    shape = problems.get("sloper").prior
+    rng = np.random.default_rng(0)
+    out = sample_posterior(shape, History(), 500, rng, "hmc")
+    assert out.z.shape == (500, shape.n_basis) and out.ess == 500
+    assert abs(out.z.mean()) < 0.05 and abs(out.z.std() - 1) < 0.05
+    assert sample_posterior(shape, History(), 0, rng).z.shape == (0, shape.n_basis)
+    with pytest.raises(ValueError, match="method"):
+        sample_posterior(shape, History(), 5, rng, "nuts")
+    with pytest.raises(ValueError, match="n_samples"):
+        sample_posterior(shape, History(), -1, rng)
+
+
+def test_rejection_is_bounded_and_reports_shortfall(sloper_case):
+    problem, history = sloper_case
+    out = sample_posterior(
+        problem.prior, history, 1000, np.random.default_rng(0), "rejection", max_draws=2000
+    )
+    assert out.info["draws"] == 2000 and len(out.z) < 1000
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
+
+
+def test_sampling_is_deterministic_given_the_generator(sloper_case):
+    problem, history = sloper_case
+    a = sample_posterior(problem.prior, history, 40, np.random.default_rng(11), "hmc")
+    b = sample_posterior(problem.prior, history, 40, np.random.default_rng(11), "hmc")
+    assert np.array_equal(a.z, b.z)
+
+
+def test_ess_of_iid_and_ar1_chains():
+    rng = np.random.default_rng(0)
+    iid = rng.normal(size=(4, 2000, 3))
+    ess = effective_sample_size(iid)
+    assert np.all(np.abs(ess / 8000 - 1) < 0.15)
+    rho = 0.9
+    x = np.zeros((4, 4000))
+    noise = rng.normal(size=(4, 4000)) * np.sqrt(1 - rho**2)
+    for t in range(1, 4000):  # an AR(1) recursion is sequential by definition
+        x[:, t] = rho * x[:, t - 1] + noise[:, t]
+    expected = 16000 * (1 - rho) / (1 + rho)
+    got = effective_sample_size(x[..., None])[0]
+    assert 0.7 * expected < got < 1.3 * expected
+    assert effective_sample_size(np.ones((2, 50, 1)))[0] == 100  # constant: no information
+
+
+def test_benchmark_histories_are_consistent_with_their_truths():
+    from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
+
+    rates = []
+    for index, segments in ((1, 3), (2, 3), (3, 5)):
+        problem, history = fig9_problem(index)
+        assert len(history) == segments
+        out = sample_posterior(
+            problem.prior,
+            history,
+            20000,
+            np.random.default_rng(index),
+            "rejection",
+            max_draws=50000,
+        )
+        rates.append(out.info["acceptance"])
+    assert rates[0] > rates[1] > rates[2] > 0  # increasingly restrictive, none empty
+    problem, history, truth = three_ledges_after_probes(10, seed=0)
+    assert len(history) == 20 and history.is_contact.sum() == 10
+    assert history_consistent(False, truth[None], history, problem.friction)[0]
+
+
+def test_warm_start_from_the_previous_posterior(sloper_case):
+    problem, history = sloper_case
+    shape = problem.prior
+    before = sample_posterior(shape, history.subset([0, 1]), 80, np.random.default_rng(4))
+    consistent = history_consistent(False, before.vertices, history, problem.friction)
+    assert consistent.sum() >= 16  # enough of the old posterior survives the new probe
+    warm = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
+    assert warm.info["warm_seeds"] == 16 and warm.info["burn_in"] == 1
+    assert history_consistent(False, warm.vertices, history, problem.friction).all()
+    again = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
+    assert np.array_equal(warm.z, again.z)
+    # no row consistent: descent starts from them, default burn-in
+    bad = before.z[~consistent][:3]
+    out = sample_posterior(shape, history, 30, np.random.default_rng(6), init_z=bad)
+    assert out.info["warm_seeds"] == 0 and out.info["burn_in"] == 3
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
+    with pytest.raises(ValueError, match="init_z"):
+        sample_posterior(shape, history, 5, np.random.default_rng(0), init_z=before.z * np.nan)
