@@ -48,8 +48,11 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
         wrenches.publish(wrench)
         # A malformed plan (NaN waypoint) never runs and gets no report ...
         plans.publish(_plan_msg(1, [[0.0, np.nan], [0.0, 0.1]]))
-        # ... so the next valid one is not "busy"; without a pose it aborts on the timeout.
-        plans.publish(_plan_msg(2, [[0.0, 0.3], [0.0, 0.1]]))
+        # ... so the next valid one is not "busy"; without a pose it aborts on the timeout. The
+        # planner's resent copy of a plan (same id and stamp) is ignored, not refused as busy.
+        second_plan = _plan_msg(2, [[0.0, 0.3], [0.0, 0.1]])
+        plans.publish(second_plan)
+        plans.publish(second_plan)
         assert spin_until(executor, lambda: len(reports) == 1, 10.0)
         assert node.tool is None and not node.filter.ready and node.filter._count == 0
         first = convert.report_from_msg(reports[0])

@@ -76,6 +76,7 @@ class ExecutorNode(Node):
         self.pose_time = self.wrench_time = None
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
+        self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
         self.create_subscription(
@@ -102,6 +103,10 @@ class ExecutorNode(Node):
         self.filter.add(self.wrench_time, force)
 
     def on_plan(self, msg: DockingPlan) -> None:
+        key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if key in self.seen_plans:  # the planner resends a plan until its report arrives
+            return
+        self.seen_plans.add(key)
         plan = convert.plan_from_msg(msg)
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")

@@ -79,7 +79,8 @@ class PlannerNode(Node):
         for msg_type, topic, callback, profile in subscriptions:
             self.create_subscription(msg_type, topic, guarded(self, topic, callback), profile)
         self.create_service(Trigger, "start_episode", self.on_start)
-        self.create_timer(0.5, self.check_stage_timeout)
+        self.create_timer(0.5, self.on_timer)
+        self.last_plan = None  # (msg, node-clock seconds when last sent)
         self.stage_start = None  # node-clock seconds when the current wait began
         self.publish_status()
 
@@ -144,9 +145,16 @@ class PlannerNode(Node):
     def seconds(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def check_stage_timeout(self) -> None:
-        """An episode never hangs: no samples or no report within stage_timeout aborts it."""
-        if self.state != RUNNING or self.seconds() - self.stage_start <= self.p.stage_timeout:
+    def on_timer(self) -> None:
+        """Resend the plan being executed every second until its report arrives (an executor
+        that matched late still gets it; the executor ignores copies), and abort an episode
+        that waits longer than stage_timeout for samples or a report."""
+        if self.state != RUNNING:
+            return
+        if self.awaiting_plan is not None and self.seconds() - self.last_plan[1] >= 1.0:
+            self.plan_pub.publish(self.last_plan[0])
+            self.last_plan = (self.last_plan[0], self.seconds())
+        if self.seconds() - self.stage_start <= self.p.stage_timeout:
             return
         waiting = "execution report" if self.awaiting_plan is not None else "posterior samples"
         self.finish(ABORTED, f"no {waiting} within {self.p.stage_timeout:.0f} s")
@@ -219,6 +227,7 @@ class PlannerNode(Node):
             return
         self.awaiting_plan = command.plan_id
         self.stage_start = self.seconds()
+        self.last_plan = (out, self.seconds())
         target = np.asarray(getattr(result, "target_point", command.waypoints[-1]), float)
         self.targets.append(target if np.all(np.isfinite(target)) else command.waypoints[-1])
         self.publish_status()

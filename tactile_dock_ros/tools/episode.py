@@ -92,7 +92,7 @@ class EpisodeClient(Node):
         self.create_subscription(
             ShapeSamples, "shape_samples", self.record.samples.append, qos.LATCHED
         )
-        self.create_subscription(DockingPlan, "plan", self.record.plans.append, qos.EVENTS)
+        self.create_subscription(DockingPlan, "plan", self.on_plan, qos.EVENTS)
         self.create_subscription(
             ExecutionReport, "execution_report", self.record.reports.append, qos.EVENTS
         )
@@ -100,6 +100,15 @@ class EpisodeClient(Node):
             DiagnosticStatus, "/perception/status", self.on_perception, qos.LATCHED
         )
         self.create_subscription(TwistStamped, "/arm/cmd_twist", self.on_command, qos.COMMAND)
+
+    def on_plan(self, msg: DockingPlan) -> None:
+        """Plans are resent until executed: keep one of each (plan_id, stamp)."""
+        key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if all(
+            (p.plan_id, p.header.stamp.sec, p.header.stamp.nanosec) != key
+            for p in self.record.plans
+        ):
+            self.record.plans.append(msg)
 
     def on_perception(self, msg: DiagnosticStatus) -> None:
         values = {kv.key: kv.value for kv in msg.values}
