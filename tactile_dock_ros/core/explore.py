@@ -146,7 +146,7 @@ def run_episode(
             tool = _backed_off(run, decision.path, problem.contact_resolution)
             if run.docked:
                 return _finish(history, log, "docked", f"docked at {np.round(run.stop_point, 4)}")
-    except Exception as error:  # noqa: BLE001 - the loop reports every failure, never raises
+    except Exception as error:  # the loop reports every failure, never raises
         return _finish(history, log, "error", f"{type(error).__name__}: {error}")
     return _finish(history, log, "cycle_cap", f"no dock after {max_cycles} cycles")
 

@@ -47,7 +47,10 @@ def likely_obstacle_region(samples: np.ndarray, edges: np.ndarray, margin: float
 
 def solid_region(mean_vertices: np.ndarray, closed: bool):
     """The mean shape's solid as a polygon, or None when the closed outline is not simple."""
-    polygon = shapely.Polygon(np.asarray(mean_vertices, float))
+    mean_vertices = np.asarray(mean_vertices, float)
+    if len(mean_vertices) < 3:
+        return None
+    polygon = shapely.Polygon(mean_vertices)
     if not closed:
         polygon = shapely.make_valid(polygon)
     return polygon if polygon.is_valid and polygon.area > 0 else None
@@ -96,7 +99,7 @@ class FreeSpace:
         return bool(shapely.covered_by(shapely.LineString([a, b]), self.free))
 
     def ascend(self, p: np.ndarray, step: float, max_steps: int = 400) -> np.ndarray | None:
-        """Path from ``p`` out of the obstacles with strictly increasing clearance ([36] of the paper).
+        """Path from ``p`` out of the obstacles with strictly increasing clearance (ref. [40]).
 
         Steps of ``step`` metres directly away from the nearest point of the mean outline.
         Returns (L, 2) points starting at ``p`` and ending in free space, or None when the
