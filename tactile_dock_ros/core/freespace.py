@@ -22,6 +22,8 @@ import shapely
 
 # Distance (metres) the obstacle outline may move under simplification.
 _SIMPLIFY_TOLERANCE = 0.002
+# Corners of the visibility graph sit this far (metres) outside the obstacle.
+_CORNER_OFFSET = 1e-6
 # The search box extends this far (metres) beyond the obstacles and the start.
 _BOX_MARGIN = 0.1
 
@@ -161,7 +163,9 @@ class FreeSpace:
 def _convex_corners(obstacles) -> np.ndarray:
     """(K, 2) ring vertices where the obstacle's interior angle is below 180 degrees.
 
-    Shortest paths around polygonal obstacles only bend at such corners. Rings are oriented
+    Shortest paths around polygonal obstacles only bend at such corners. Each is moved
+    ``_CORNER_OFFSET`` outward along its bisector so that segments between corners of one
+    obstacle pass the exact free-space test despite rounding. Rings are oriented
     so the obstacle lies on the left (exterior CCW, holes CW); a left turn is a convex corner.
     """
     oriented = shapely.orient_polygons(obstacles)
@@ -175,5 +179,9 @@ def _convex_corners(obstacles) -> np.ndarray:
         prev, nxt = np.roll(c, 1, axis=0), np.roll(c, -1, axis=0)
         e1, e2 = c - prev, nxt - c
         turn = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        corners.append(c[turn > 0])
+        u1 = e1 / np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
+        u2 = e2 / np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-300)
+        out = u1 - u2
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+        corners.append((c + _CORNER_OFFSET * out)[turn > 0])
     return np.vstack(corners) if corners else np.zeros((0, 2))
