@@ -136,7 +136,6 @@ class FreeSpace:
         nodes = np.vstack([self.nodes, start, goal])
         i_start, i_goal = len(nodes) - 2, len(nodes) - 1
         h = np.linalg.norm(nodes - goal, axis=1)
-        g_best = np.full(len(nodes), np.inf)
         parent = np.full(len(nodes), -1)
         closed = np.zeros(len(nodes), bool)
         queue = [(h[i_start], 0.0, i_start, -1)]
@@ -145,13 +144,13 @@ class FreeSpace:
             _, g, v, u = heapq.heappop(queue)
             if closed[v] or (u >= 0 and not self.visible(nodes[u], nodes[v])):
                 continue
-            closed[v], g_best[v], parent[v] = True, g, u
+            closed[v], parent[v] = True, u
             if v == i_goal:
                 break
-            step = np.linalg.norm(nodes - nodes[v], axis=1)
-            for w in np.flatnonzero(~closed & (g + step < g_best)):
-                g_best[w] = g + step[w]
-                heapq.heappush(queue, (g_best[w] + h[w], g_best[w], int(w), int(v)))
+            # Tentative costs must not prune pushes: an entry may still fail its visibility test.
+            g_new = g + np.linalg.norm(nodes - nodes[v], axis=1)
+            for w in np.flatnonzero(~closed):
+                heapq.heappush(queue, (g_new[w] + h[w], g_new[w], int(w), int(v)))
         if not closed[i_goal]:
             return None
         order = [i_goal]
