@@ -22,6 +22,8 @@ import shapely
 
 # Distance (metres) the obstacle outline may move under simplification.
 _SIMPLIFY_TOLERANCE = 0.002
+# Corners of the visibility graph sit this far (metres) outside the obstacle.
+_CORNER_OFFSET = 1e-6
 # The search box extends this far (metres) beyond the obstacles and the start.
 _BOX_MARGIN = 0.1
 
@@ -47,7 +49,10 @@ def likely_obstacle_region(samples: np.ndarray, edges: np.ndarray, margin: float
 
 def solid_region(mean_vertices: np.ndarray, closed: bool):
     """The mean shape's solid as a polygon, or None when the closed outline is not simple."""
-    polygon = shapely.Polygon(np.asarray(mean_vertices, float))
+    mean_vertices = np.asarray(mean_vertices, float)
+    if len(mean_vertices) < 3:
+        return None
+    polygon = shapely.Polygon(mean_vertices)
     if not closed:
         polygon = shapely.make_valid(polygon)
     return polygon if polygon.is_valid and polygon.area > 0 else None
@@ -96,7 +101,7 @@ class FreeSpace:
         return bool(shapely.covered_by(shapely.LineString([a, b]), self.free))
 
     def ascend(self, p: np.ndarray, step: float, max_steps: int = 400) -> np.ndarray | None:
-        """Path from ``p`` out of the obstacles with strictly increasing clearance ([36] of the paper).
+        """Path from ``p`` out of the obstacles with strictly increasing clearance (ref. [40]).
 
         Steps of ``step`` metres directly away from the nearest point of the mean outline.
         Returns (L, 2) points starting at ``p`` and ending in free space, or None when the
@@ -131,7 +136,6 @@ class FreeSpace:
         nodes = np.vstack([self.nodes, start, goal])
         i_start, i_goal = len(nodes) - 2, len(nodes) - 1
         h = np.linalg.norm(nodes - goal, axis=1)
-        g_best = np.full(len(nodes), np.inf)
         parent = np.full(len(nodes), -1)
         closed = np.zeros(len(nodes), bool)
         queue = [(h[i_start], 0.0, i_start, -1)]
@@ -140,13 +144,13 @@ class FreeSpace:
             _, g, v, u = heapq.heappop(queue)
             if closed[v] or (u >= 0 and not self.visible(nodes[u], nodes[v])):
                 continue
-            closed[v], g_best[v], parent[v] = True, g, u
+            closed[v], parent[v] = True, u
             if v == i_goal:
                 break
-            step = np.linalg.norm(nodes - nodes[v], axis=1)
-            for w in np.flatnonzero(~closed & (g + step < g_best)):
-                g_best[w] = g + step[w]
-                heapq.heappush(queue, (g_best[w] + h[w], g_best[w], int(w), int(v)))
+            # Tentative costs must not prune pushes: an entry may still fail its visibility test.
+            g_new = g + np.linalg.norm(nodes - nodes[v], axis=1)
+            for w in np.flatnonzero(~closed):
+                heapq.heappush(queue, (g_new[w] + h[w], g_new[w], int(w), int(v)))
         if not closed[i_goal]:
             return None
         order = [i_goal]
@@ -158,7 +162,9 @@ class FreeSpace:
 def _convex_corners(obstacles) -> np.ndarray:
     """(K, 2) ring vertices where the obstacle's interior angle is below 180 degrees.
 
-    Shortest paths around polygonal obstacles only bend at such corners. Rings are oriented
+    Shortest paths around polygonal obstacles only bend at such corners. Each is moved
+    ``_CORNER_OFFSET`` outward along its bisector so that segments between corners of one
+    obstacle pass the exact free-space test despite rounding. Rings are oriented
     so the obstacle lies on the left (exterior CCW, holes CW); a left turn is a convex corner.
     """
     oriented = shapely.orient_polygons(obstacles)
@@ -172,5 +178,9 @@ def _convex_corners(obstacles) -> np.ndarray:
         prev, nxt = np.roll(c, 1, axis=0), np.roll(c, -1, axis=0)
         e1, e2 = c - prev, nxt - c
         turn = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        corners.append(c[turn > 0])
+        u1 = e1 / np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
+        u2 = e2 / np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-300)
+        out = u1 - u2
+        out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+        corners.append((c + _CORNER_OFFSET * out)[turn > 0])
     return np.vstack(corners) if corners else np.zeros((0, 2))

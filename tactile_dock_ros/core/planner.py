@@ -9,8 +9,10 @@ region by a visibility-graph shortest path (``core.freespace``).
 Objective (eq. 24): J = P_dock * B(min_p' |aim - aim'| / w), B(z) = 1 - exp(-z), where aim is
 the terminal segment's target point (the expected edge midpoint), aim' those of earlier plans,
 and w the contact resolution. P_dock comes from the probabilistic simulation
-(``probsim.dock_probability``) of the terminal segment under the moment-fit Gaussian of the
-posterior samples.
+(``probsim``) under the moment-fit Gaussian of the posterior samples: candidates are ranked by
+the terminal move's estimate (all edges in one batched call); the reported P_dock is
+``probsim.dock_probability`` of the whole chosen path (which also multiplies in the probability
+that the prefix touches nothing, close to 1 since it stays in the UOR).
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
@@ -148,19 +150,13 @@ def evaluate(
     load: np.ndarray,
     compliant: bool,
 ) -> Candidates:
-    """P_dock and stop-feature entropy of each terminal segment (steps 3-4 of Sec. V-B).
-
-    One ``probsim.dock_probability`` call per candidate (the contract takes one path; each is
-    O(n)), so this loop over edges is bounded by E.
-    """
-    p_dock = np.zeros(len(segments["edges"]))
-    entropy = np.zeros(len(segments["edges"]))
-    for j, (a, b) in enumerate(zip(segments["start"], segments["end"], strict=True)):
-        estimate = probsim.dock_probability(posterior, np.array([a, b]), load, compliant)
-        stops = np.concatenate([estimate.p_stop_vertex, estimate.p_stop_edge])
-        outcome = np.clip(np.append(stops, 1.0 - stops.sum()), 0.0, 1.0)
-        p_dock[j] = float(estimate.p_dock)
-        entropy[j] = -np.sum(outcome * np.log(np.where(outcome > 0, outcome, 1.0)))
+    """P_dock and stop-feature entropy of every terminal segment at once (steps 3-4, Sec. V-B)."""
+    p_dock, stop_vertex, stop_edge = probsim.dock_probabilities(
+        posterior, segments["start"], segments["end"], load, compliant
+    )
+    stops = np.hstack([stop_vertex, stop_edge])
+    outcome = np.clip(np.hstack([stops, 1.0 - stops.sum(axis=1, keepdims=True)]), 0.0, 1.0)
+    entropy = -np.sum(outcome * np.log(np.where(outcome > 0, outcome, 1.0)), axis=1)
     return Candidates(**segments, p_dock=p_dock, entropy=entropy)
 
 
@@ -289,15 +285,19 @@ def plan(
         if middle is None:
             continue
         path = np.vstack([lead[:-1], middle, tail[1:], candidates.end[j]])
+        path = path[np.r_[True, np.any(np.diff(path, axis=0) != 0, axis=1)]]
         if space.touches_outline(path[:-1]):
             continue
+        # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
+        p_dock = probsim.dock_probability(posterior, path, load, compliant).p_dock
+        value = values[j] * p_dock / max(candidates.p_dock[j], 1e-300)
         return Plan(
             "dock",
             path,
-            float(candidates.p_dock[j]),
-            float(values[j]),
+            float(p_dock),
+            float(value if objective in ("ours", "greedy") else values[j]),
             int(candidates.edges[j]),
-            f"{objective}: edge {candidates.edges[j]} with P_dock {candidates.p_dock[j]:.3f}",
+            f"{objective}: edge {candidates.edges[j]} with P_dock {p_dock:.3f}",
             candidates.aim[j],
             candidates,
         )

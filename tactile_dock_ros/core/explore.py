@@ -1,0 +1,175 @@
+"""Bayesian tactile exploration loop (paper Sec. III-B) and the Sec. VI-A baselines.
+
+Each cycle: infer (posterior samples given the history) -> plan -> execute the plan on the
+ground-truth simulator -> add the observed segments to the history. The episode ends when the
+tool docks, when the planner gives up (best P_dock below the threshold, or no site/path left),
+after ``max_cycles`` cycles (``outcome == "cycle_cap"``, not a give-up), or on an error, which
+is caught and reported (``outcome == "error"``, ``message``) so nothing escapes the loop.
+
+Strategies share the estimator and the planner and differ in the planner's objective:
+``ours`` = eq. (24); ``gw`` = growing window; ``ig`` = one greedy docking step then two
+information-gain probes, repeating (cycle 1, 4, 7, ... greedy).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import planner, sampling, simulate
+from .history import History
+
+STRATEGIES = ("ours", "gw", "ig")
+
+
+@dataclass(frozen=True)
+class CycleLog:
+    """One exploration cycle: what was planned, what happened, and how long it took."""
+
+    cycle: int
+    plan: planner.Plan
+    samples: np.ndarray  # (k, n, 2) a few posterior samples, for plotting
+    docked: bool
+    contact: bool
+    stop_point: np.ndarray  # (2,) NaN when nothing was executed
+    inference_seconds: float
+    planning_seconds: float
+    dropped: int  # observations the sampler ignored as inconsistent
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """Outcome of ``run_episode``: ``outcome`` in docked | gave_up | cycle_cap | error."""
+
+    docked: bool
+    gave_up: bool
+    cycles: int  # executed moves
+    history: History
+    cycles_log: list[CycleLog] = field(default_factory=list)
+    outcome: str = "cycle_cap"
+    message: str = ""
+
+
+def _objective(strategy: str, cycle: int) -> str:
+    if strategy == "ours":
+        return "ours"
+    if strategy == "gw":
+        return "window"
+    return "greedy" if cycle % 3 == 0 else "info_gain"
+
+
+def run_episode(
+    problem,
+    ground_truth: np.ndarray,
+    strategy: str = "ours",
+    rng: np.random.Generator | None = None,
+    max_cycles: int = 30,
+    *,
+    n_samples: int = 100,
+    method: str = "hmc",
+    give_up_threshold: float = 1e-3,
+    compliant: bool = True,
+    keep_samples: int = 20,
+) -> EpisodeResult:
+    """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
+
+    ``rng`` drives every random choice (default: ``np.random.default_rng(0)``), so the same
+    seed gives the same episode. Posterior chains are warm-started from the previous cycle's
+    samples (``sampling.sample_posterior(init_z=...)``).
+    """
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown strategy {strategy!r}; choose from {STRATEGIES}")
+    if max_cycles < 1:
+        raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
+    rng = np.random.default_rng(0) if rng is None else rng
+    prior = problem.prior
+    history = History()
+    log: list[CycleLog] = []
+    targets = np.zeros((0, 2))
+    tool = np.asarray(problem.start, float)
+    z_previous = None
+    try:
+        for cycle in range(max_cycles):
+            t0 = time.perf_counter()
+            post = sampling.sample_posterior(
+                prior, history, n_samples, rng, method, init_z=z_previous
+            )
+            t1 = time.perf_counter()
+            if len(post.vertices) < 2:
+                return _finish(history, log, "error", f"inference returned {len(post.z)} samples")
+            z_previous = post.z
+            decision = planner.plan(
+                post.vertices,
+                prior,
+                history,
+                tool,
+                problem.load,
+                problem.friction,
+                problem.contact_resolution,
+                targets,
+                give_up_threshold,
+                objective=_objective(strategy, cycle),
+                compliant=compliant,
+            )
+            t2 = time.perf_counter()
+            entry = dict(
+                cycle=cycle,
+                plan=decision,
+                samples=post.vertices[:keep_samples],
+                inference_seconds=t1 - t0,
+                planning_seconds=t2 - t1,
+                dropped=len(post.dropped),
+            )
+            if decision.decision == "give_up":
+                log.append(
+                    CycleLog(**entry, docked=False, contact=False, stop_point=np.full(2, np.nan))
+                )
+                return _finish(history, log, "gave_up", decision.reason)
+            run = simulate.guarded_path(
+                ground_truth,
+                prior.closed,
+                decision.path,
+                problem.friction,
+                problem.load,
+                compliant,
+                problem.contact_resolution,
+            )
+            log.append(
+                CycleLog(**entry, docked=run.docked, contact=run.contact, stop_point=run.stop_point)
+            )
+            history = history.extend(
+                run.observations.a, run.observations.b, run.observations.status
+            )
+            targets = np.vstack([targets, decision.target_point])
+            tool = _backed_off(run, decision.path, problem.contact_resolution)
+            if run.docked:
+                return _finish(history, log, "docked", f"docked at {np.round(run.stop_point, 4)}")
+    except Exception as error:  # the loop reports every failure, never raises
+        return _finish(history, log, "error", f"{type(error).__name__}: {error}")
+    return _finish(history, log, "cycle_cap", f"no dock after {max_cycles} cycles")
+
+
+def _backed_off(run, path: np.ndarray, contact_resolution: float) -> np.ndarray:
+    """Where the tool rests after a move: backed off the contact along the last free segment."""
+    obs = run.observations
+    free = np.flatnonzero(obs.status == 0)
+    if len(free):
+        return np.asarray(obs.b[free[-1]], float)
+    if run.contact:  # contact within the first resolution step: back up along the path
+        direction = path[1] - path[0]
+        return run.stop_point - contact_resolution * direction / np.linalg.norm(direction)
+    return np.asarray(path[-1], float)
+
+
+def _finish(history, log, outcome: str, message: str) -> EpisodeResult:
+    return EpisodeResult(
+        docked=outcome == "docked",
+        gave_up=outcome == "gave_up",
+        cycles=sum(1 for c in log if c.plan.decision == "dock"),
+        history=history,
+        cycles_log=log,
+        outcome=outcome,
+        message=message,
+    )

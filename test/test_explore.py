@@ -1,0 +1,78 @@
+"""Exploration loop (Sec. III-B) on seeded ground truths."""
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.core import explore, problems, sampling, simulate
+from tactile_dock_ros.core.history import History, Status
+
+
+def _truth(name, want_feasible, first_seed=0):
+    problem = problems.get(name)
+    for seed in range(first_seed, first_seed + 50):  # bounded search for a matching instance
+        truth = problem.sample_ground_truth(np.random.default_rng(seed))
+        if simulate.feasible(problem, truth) == want_feasible:
+            return problem, truth
+    pytest.skip(f"no {'feasible' if want_feasible else 'infeasible'} {name} truth in 50 seeds")
+
+
+@pytest.mark.parametrize("strategy", explore.STRATEGIES)
+def test_feasible_episode_docks(strategy):
+    problem, truth = _truth("notch", True)
+    result = explore.run_episode(problem, truth, strategy, np.random.default_rng(1), 15)
+    assert result.outcome == "docked", result.message
+    assert result.docked and not result.gave_up and result.cycles >= 1
+    last = result.cycles_log[-1]
+    assert last.docked and last.plan.decision == "dock"
+    assert len(result.history) >= 2 and result.history.status[-1] != Status.FREE
+
+
+def test_infeasible_episode_gives_up():
+    problem, truth = _truth("sloper", False)
+    result = explore.run_episode(problem, truth, "ours", np.random.default_rng(2), 15)
+    assert result.outcome == "gave_up", result.message
+    assert result.gave_up and not result.docked
+    assert result.cycles_log[-1].plan.decision == "give_up"
+
+
+def test_same_seed_same_episode():
+    problem, truth = _truth("sloper", False)
+    runs = [explore.run_episode(problem, truth, "ours", np.random.default_rng(5), 6) for _ in "ab"]
+    assert runs[0].outcome == runs[1].outcome and runs[0].cycles == runs[1].cycles
+    for a, b in zip(runs[0].cycles_log, runs[1].cycles_log, strict=True):
+        assert np.array_equal(a.plan.path, b.plan.path)
+    assert np.array_equal(runs[0].history.a, runs[1].history.a)
+
+
+def test_errors_are_reported_not_raised():
+    problem = problems.get("notch")
+    truth = np.full((problem.prior.n_vertices, 2), np.nan)
+    result = explore.run_episode(problem, truth, "ours", np.random.default_rng(0), 3)
+    assert result.outcome == "error" and "ValueError" in result.message
+    assert not result.docked and not result.gave_up
+
+
+def test_bad_arguments_raise():
+    problem = problems.get("notch")
+    truth = problem.prior.mean_vertices
+    with pytest.raises(ValueError):
+        explore.run_episode(problem, truth, "random", np.random.default_rng(0))
+    with pytest.raises(ValueError):
+        explore.run_episode(problem, truth, "ours", np.random.default_rng(0), max_cycles=0)
+
+
+def test_contradictory_history_still_plans():
+    problem = problems.get("notch")
+    mean = problem.prior.mean_vertices
+    point = 0.5 * (mean[9] + mean[10])
+    up, down = point + np.array([0, 0.1]), point - np.array([0, 0.1])
+    history = History(  # passed freely through the surface, then stuck on it
+        [up, point + np.array([0, 0.005])],
+        [down, point - np.array([0, 0.005])],
+        [Status.FREE, Status.STICK],
+    )
+    post = sampling.sample_posterior(problem.prior, history, 40, np.random.default_rng(0))
+    plan = explore.planner.plan(
+        post.vertices, problem.prior, history, problem.start, problem.load, problem.friction
+    )
+    assert plan.decision in ("dock", "give_up") and plan.reason

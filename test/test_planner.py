@@ -1,0 +1,122 @@
+"""Docking planner (Sec. V-B) on prior samples of the benchmark problems."""
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_dock_ros.core import planner, problems, probsim
+from tactile_dock_ros.core.freespace import FreeSpace, likely_obstacle_region
+from tactile_dock_ros.core.shape import GaussianShape
+
+
+def _prior_plan(name, seed=0, count=60, **kwargs):
+    problem = problems.get(name)
+    rng = np.random.default_rng(seed)
+    samples = problem.prior.vertices(problem.prior.sample_z(rng, count))
+    args = dict(
+        start=problem.start,
+        load=problem.load,
+        friction=problem.friction,
+        contact_resolution=problem.contact_resolution,
+    )
+    args.update(kwargs)
+    return problem, samples, planner.plan(samples, problem.prior, None, **args)
+
+
+@pytest.mark.parametrize("name", problems.names())
+def test_plan_is_free_then_loads_through_target_edge(name):
+    problem, samples, plan = _prior_plan(name)
+    assert plan.decision == "dock", plan.reason
+    mean = samples.mean(axis=0)
+    outline = shapely.LineString(mean)
+    assert np.allclose(plan.path[0], problem.start)
+    assert not shapely.intersects(outline, shapely.LineString(plan.path[:-1]))
+    a, b = plan.path[-2], plan.path[-1]
+    direction = (b - a) / np.linalg.norm(b - a)
+    assert np.allclose(direction, problem.load, atol=1e-9)
+    c, d = mean[problem.prior.edges[plan.target_edge]]
+    assert np.allclose(plan.target_point, 0.5 * (c + d))
+    assert shapely.intersects(shapely.LineString([a, b]), shapely.LineString([c, d]))
+    posterior = GaussianShape.from_samples(samples, problem.prior.closed, problem.friction)
+    expected = probsim.dock_probability(posterior, plan.path, problem.load).p_dock
+    assert plan.p_dock == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    assert plan.p_dock >= plan.candidates.p_dock.max() * 0.5  # prefix rarely touches anything
+
+
+def test_objective_applies_exploration_bonus():
+    _, _, first = _prior_plan("three_ledges")
+    _, _, again = _prior_plan("three_ledges", previous_targets=[first.target_point])
+    assert again.target_point.tolist() != first.target_point.tolist()
+    bonus = planner.exploration_bonus(first.candidates.aim, [first.target_point], 0.01)
+    j = np.flatnonzero(first.candidates.edges == first.target_edge)[0]
+    assert bonus[j] == 0.0 and np.all(bonus >= 0) and np.all(bonus <= 1)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 8))
+def test_lor_covers_every_sample_edge(seed, count):
+    shape = problems.get("notch").prior
+    samples = shape.vertices(shape.sample_z(np.random.default_rng(seed), count))
+    lor = likely_obstacle_region(samples, shape.edges, margin=1e-4)
+    for s in samples:
+        assert shapely.covers(lor, shapely.LineString(s))
+
+
+def test_shortest_path_avoids_obstacles_and_is_no_longer_than_detour():
+    block = shapely.box(-1.0, -1.0, 1.0, 1.0)
+    start, goal = np.array([-2.0, 0.0]), np.array([1.05, 0.0])
+    space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, start)
+    path = space.shortest_path(start, goal)
+    assert path is not None and len(path) >= 3
+    assert not shapely.intersects(shapely.LineString(path), shapely.box(-0.99, -0.99, 0.99, 0.99))
+    length = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+    assert length <= np.hypot(1.0, 1.0) + 2 + np.hypot(0.05, 1.0) + 0.02  # over the top
+
+
+def test_no_edge_facing_the_load_gives_up():
+    _, _, plan = _prior_plan("notch", load=np.array([0.0, 1.0]))
+    assert plan.decision == "give_up" and "faces" in plan.reason
+    assert plan.path.shape == (0, 2) and plan.target_edge == -1
+
+
+def test_start_inside_lor_climbs_out_or_gives_up_with_reason():
+    problem = problems.get("three_ledges")
+    mean = problem.prior.mean_vertices
+    start = 0.5 * (mean[40] + mean[41]) + np.array([0.0, 0.002])
+    _, _, plan = _prior_plan("three_ledges", start=start)
+    assert plan.reason
+    if plan.decision == "dock":
+        assert np.allclose(plan.path[0], start)
+        assert not shapely.intersects(shapely.LineString(mean), shapely.LineString(plan.path[:-1]))
+
+
+def test_low_threshold_gap_gives_up():
+    _, _, plan = _prior_plan("sloper", give_up_threshold=0.999)
+    assert plan.decision == "give_up" and "threshold" in plan.reason
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(start=np.array([np.nan, 0.0])),
+        dict(load=np.zeros(2)),
+        dict(contact_resolution=0.0),
+        dict(give_up_threshold=1.5),
+        dict(objective="nonsense"),
+    ],
+)
+def test_bad_input_raises(kwargs):
+    with pytest.raises(ValueError):
+        _prior_plan("sloper", **kwargs)
+
+
+def test_bad_samples_raise():
+    problem = problems.get("sloper")
+    samples = problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(0), 5))
+    samples[2, 3, 0] = np.inf
+    with pytest.raises(ValueError):
+        planner.plan(samples, problem.prior, None, problem.start, problem.load)
+    with pytest.raises(ValueError):
+        planner.plan(samples[:1], problem.prior, None, problem.start, problem.load)
