@@ -14,6 +14,16 @@ from tactile_dock_ros.nodes import convert, qos
 pytestmark = pytest.mark.dds
 
 
+def _needs(module: str):
+    return pytest.mark.skipif(
+        importlib.util.find_spec(f"tactile_dock_ros.core.{module}") is None,
+        reason=f"tactile_dock_ros.core.{module} is not in this tree yet",
+    )
+
+
+needs_sampling, needs_planner = _needs("sampling"), _needs("planner")
+
+
 def _plan_msg(plan_id, waypoints):
     command = convert.PlanCommand(
         plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), 3.0, 0.1, False,
@@ -89,10 +99,7 @@ def _zero(twist: TwistStamped) -> bool:
     return (v.x, v.y, v.z) == (0.0, 0.0, 0.0)
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("tactile_dock_ros.core.sampling") is None,
-    reason="tactile_dock_ros.core.sampling is not in this tree yet",
-)
+@needs_sampling
 def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
     from tactile_dock_ros.msg import ContactHistory
 
@@ -118,10 +125,7 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
         assert node.handled_plans == {1}
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
-    reason="tactile_dock_ros.core.planner is not in this tree yet",
-)
+@needs_planner
 def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
     from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
 
@@ -152,10 +156,7 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
         assert node.history is None and node.prior is None and node.state == "IDLE"
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
-    reason="tactile_dock_ros.core.planner is not in this tree yet",
-)
+@needs_planner
 def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
@@ -178,10 +179,7 @@ def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
     assert "posterior samples" in statuses[-1].message
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("tactile_dock_ros.core.planner") is None,
-    reason="tactile_dock_ros.core.planner is not in this tree yet",
-)
+@needs_planner
 def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger

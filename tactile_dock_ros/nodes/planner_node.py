@@ -228,8 +228,7 @@ class PlannerNode(Node):
         self.awaiting_plan = command.plan_id
         self.stage_start = self.seconds()
         self.last_plan = (out, self.seconds())
-        target = np.asarray(getattr(result, "target_point", command.waypoints[-1]), float)
-        self.targets.append(target if np.all(np.isfinite(target)) else command.waypoints[-1])
+        self.targets.append(np.asarray(result.target_point, float))  # eq. (24) novelty
         self.publish_status()
 
     def plan(self, vertices: np.ndarray):
