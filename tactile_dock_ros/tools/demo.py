@@ -52,11 +52,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with bringup.running(arguments, log_dir):
             record = client.run(executor, args.timeout)
+    except (TimeoutError, RuntimeError) as err:
+        print(f"demo failed: {err} (see the node logs in {log_dir})")
+        return 1
     finally:
         executor.shutdown()
         client.destroy_node()
         rclpy.shutdown()
-    print(f"result: {record.state} after {len(record.plans)} cycles ({record.status.message})")
+    why = record.status.message if record.status is not None else "no episode status"
+    print(f"result: {record.state} after {len(record.plans)} cycles ({why})")
     print(episode.latency_table(record))
     episode.plot(record, args.png)
     print(f"wrote {args.png}")
