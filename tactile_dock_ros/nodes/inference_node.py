@@ -35,6 +35,7 @@ class InferenceNode(Node):
         self.p = declare(self, PARAMS)
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
+        self.last_z = None  # (N, m) previous posterior in z, for the sampler's warm start
         self.frame_id = "dock_plane"
         self.history = History()
         self.plan_ids = np.zeros(0, int)
@@ -53,6 +54,7 @@ class InferenceNode(Node):
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         self.prior = convert.shape_from_msg(msg)
+        self.last_z = None
         self.frame_id = msg.header.frame_id or self.frame_id
         self.get_logger().info(
             f"prior: {self.prior.n_vertices} vertices, {self.prior.n_basis} basis columns"
@@ -64,6 +66,7 @@ class InferenceNode(Node):
             return
         self.episode = msg.data
         self.history, self.plan_ids = History(), np.zeros(0, int)
+        self.last_z = None
         self.handled_plans.clear()
         self.get_logger().info(f"episode {self.episode}: history cleared")
         self.update()
@@ -87,9 +90,15 @@ class InferenceNode(Node):
             return
         try:
             posterior = sample_posterior(
-                self.prior, self.history, self.p.num_samples, self.rng, method=self.p.method
+                self.prior,
+                self.history,
+                self.p.num_samples,
+                self.rng,
+                method=self.p.method,
+                init_z=self.last_z,  # warm start from the previous cycle's posterior
             )
             vertices = posterior.vertices
+            self.last_z = posterior.z if len(posterior.z) else None
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
             vertices = np.zeros((0, self.prior.n_vertices, 2))
