@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "docking": "Fig. 13: ours vs growing window vs info gain, cycles and success per problem",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
