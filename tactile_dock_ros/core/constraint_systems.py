@@ -47,6 +47,7 @@ class HistoryConstraints:
         self.n_prims = len(self.prim_pair)
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
+        self.pair_prims = self._prim_index  # (P, 6) primitive of each slot, -1 inactive
         # flat per-primitive coefficients (K,), (K, 4), (K,)
         self._psign = self._sign[self.prim_pair, self.prim_slot]
         self._plin = self._lin[self.prim_pair, self.prim_slot]
@@ -85,8 +86,8 @@ class HistoryConstraints:
         full[..., self.prim_pair, self.prim_slot] = g
         return full
 
-    def violations(self, g: np.ndarray) -> np.ndarray:
-        """Per-observation values (..., n_obs) from primitive values (..., K)."""
+    def pair_values_of(self, g: np.ndarray) -> np.ndarray:
+        """Per-pair values (..., P) from primitive values (..., K)."""
         p, nc = self.n_pairs, len(self._cone)
         g1, g2, g3, g4 = (g[..., j * p : (j + 1) * p] for j in range(4))
         gmax = np.maximum(np.maximum(g1, g2), np.maximum(g3, g4))
@@ -94,8 +95,39 @@ class HistoryConstraints:
         if nc:
             cone = np.maximum(g[..., 4 * p : 4 * p + nc], g[..., 4 * p + nc :])
             gmax[..., self._cone] = np.maximum(gmax[..., self._cone], cone)
-        pair = np.where(self.structure.free_pair, np.maximum(-gmax, gmin), gmax)
+        return np.where(self.structure.free_pair, np.maximum(-gmax, gmin), gmax)
+
+    def reduce_pairs(self, pair: np.ndarray) -> np.ndarray:
+        """Per-observation values (..., n_obs) from per-pair values (..., P)."""
         return self.structure.reduce_pairs(pair)
+
+    def violations(self, g: np.ndarray) -> np.ndarray:
+        """Per-observation values (..., n_obs) from primitive values (..., K)."""
+        return self.reduce_pairs(self.pair_values_of(g))
+
+    def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """Values (R, S) of pairs ``pair`` (R,) from their slot values g (R, S, 6), inactive
+        slots -inf (see ``PairStructure.pair_values``)."""
+        g1, g2, g3, g4, g5, g6 = np.moveaxis(g, -1, 0)
+        gmax = np.maximum(np.maximum(g1, g2), np.maximum(g3, g4))
+        gmin = np.minimum(np.minimum(g1, g2), np.minimum(g3, g4))
+        free_val = np.maximum(-gmax, gmin)
+        contact = np.maximum(gmax, np.maximum(g5, g6))
+        return np.where(self.structure.free_pair[pair, None], free_val, contact)
+
+    def observation_columns(self, pair: np.ndarray) -> np.ndarray:
+        """Sorted indices of all pairs of the observations that own ``pair``."""
+        obs = self.structure.pairs[:, 0]
+        return np.flatnonzero(np.isin(obs, obs[pair]))
+
+    def reduce_columns(self, pair: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """Values (..., k') of the observations owning ``columns`` (from
+        ``observation_columns``) from their per-pair values ``pair`` (..., len(columns))."""
+        obs = self.structure.pairs[columns, 0]
+        starts = np.flatnonzero(np.diff(obs, prepend=-1))
+        q = np.where(self.structure.free_pair[columns], -pair, pair)
+        m = np.minimum.reduceat(q, starts, axis=-1)
+        return np.where(self.structure.free_obs[obs[starts]], -m, m)
 
     def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For each row, the primitive k and sign s with f_obs(z) = s g_k(z) locally (the
@@ -118,8 +150,8 @@ class HistoryConstraints:
         prim = self._prim_index[pair, slot]
         return prim, sign
 
-    def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        """(C, K) mask of the primitives whose roots can matter in a window: those of pairs that
+    def live_pairs(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
+        """(C, P) mask of the pairs whose roots can matter in a window: those that
         can reach a crossing pattern (all primitives <= 0: enters; free pairs also all >= 0:
         leaves). Any other pair keeps the sign of its value throughout the window (some
         primitive keeps a strict sign against the pattern), so its roots change nothing.
@@ -135,7 +167,7 @@ class HistoryConstraints:
 
         enter = every_slot((g0 <= 0) | may_vanish)
         leave = self.structure.free_pair & every_slot((g0 >= 0) | may_vanish)
-        return (enter | leave)[..., self.prim_pair]
+        return enter | leave
 
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
@@ -182,12 +214,30 @@ class LinearConstraints:
         self.n_prims, self.n_dim = self.F.shape
         self.n_obs = self.n_prims
         self.linear = np.ones(self.n_prims, dtype=bool)
+        self.n_pairs = self.n_prims  # each inequality is its own pair and observation
+        self.prim_pair = np.arange(self.n_prims)
+        self.pair_prims = self.prim_pair[:, None]
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return z @ self.F.T + self.h
 
     def violations(self, g: np.ndarray) -> np.ndarray:
         return g
+
+    def pair_values_of(self, g: np.ndarray) -> np.ndarray:
+        return g
+
+    def reduce_pairs(self, pair: np.ndarray) -> np.ndarray:
+        return pair
+
+    def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
+        return g[..., 0]
+
+    def observation_columns(self, pair: np.ndarray) -> np.ndarray:
+        return np.unique(pair)
+
+    def reduce_columns(self, pair: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        return pair
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         zeros = np.zeros((len(z0), self.n_prims))
@@ -202,8 +252,8 @@ class LinearConstraints:
     def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(obs), np.ones(len(obs))
 
-    def worth_solving(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        return np.ones_like(may_vanish, dtype=bool)
+    def live_pairs(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
+        return may_vanish
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         return self.F[prim]

@@ -83,19 +83,36 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef: np.ndarray, mids: np.ndarray, chunk: int = 8):
+def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
-    such segment. Chunked: the first exit is usually among the first few roots."""
+    such segment. Only the ``live`` (C, P) pairs are evaluated: every other pair keeps the sign
+    of its value ``base`` (C, P) at the window start throughout the window (``live_pairs``),
+    so observations without live pairs stay satisfied and only the others are reduced.
+    Chunked: the first exit is usually among the first few roots."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
     first = np.zeros(c, dtype=int)
+    ci, pj = np.nonzero(live)
+    if ci.size == 0:
+        return hit, first
+    columns = system.observation_columns(pj)
+    at_column = np.searchsorted(columns, pj)
+    prims = system.pair_prims[pj]  # (R, 6)
+    inactive = (prims < 0)[:, None]
+    pair_coef = coef[ci[:, None], np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
+    base = base[:, columns]
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
         rows = np.flatnonzero(~hit)
         if rows.size == 0:
             break
-        part = mids[rows, lo : lo + chunk]
-        g = np.matmul(trig_basis(part), coef[rows].swapaxes(1, 2))
-        bad = np.any(system.violations(g) > 0, axis=-1)
+        width = min(chunk, n_seg - lo)
+        values = np.repeat(base[rows, None], width, axis=1)  # (r, s, columns)
+        sel = np.flatnonzero(~hit[ci])
+        at_row = np.cumsum(~hit)[ci[sel]] - 1  # position of the live pair's chain in rows
+        g = np.matmul(trig_basis(mids[ci[sel], lo : lo + width]), pair_coef[sel])
+        g = np.where(inactive[sel], -np.inf, g)
+        values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
+        bad = np.any(system.reduce_columns(values, columns) > 0, axis=-1)
         found = bad.any(axis=1)
         hit[rows[found]] = True
         first[rows[found]] = lo + np.argmax(bad[found], axis=1)
@@ -150,10 +167,12 @@ def hmc_chains(
         span = np.minimum(lc, window)
         coef = system.ellipse_coefficients(zc, pc)
         solve = window_can_vanish(coef, span)
-        solve &= system.worth_solving(coef[..., 0] + coef[..., 1] + coef[..., 3], solve)
+        g0 = coef[..., 0] + coef[..., 1] + coef[..., 3]
+        live = system.live_pairs(g0, solve)
+        solve &= live[:, system.prim_pair]
         roots, owner = ellipse_roots(coef, solve, system.linear, span)
         edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
-        hit, first = _first_infeasible(system, coef, mids)
+        hit, first = _first_infeasible(system, coef, mids, live, system.pair_values_of(g0))
         stuck = hit & (first == 0)
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
