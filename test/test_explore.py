@@ -76,3 +76,13 @@ def test_contradictory_history_still_plans():
         post.vertices, problem.prior, history, problem.start, problem.load, problem.friction
     )
     assert plan.decision in ("dock", "give_up") and plan.reason
+
+
+def test_plot_renders_an_episode(tmp_path):
+    from tactile_dock_ros.tools import plot
+
+    problem, truth = _truth("notch", True)
+    result = explore.run_episode(problem, truth, "ours", np.random.default_rng(1), 3)
+    out = tmp_path / "episode.png"
+    plot.render(problem, truth, result, out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -81,15 +81,19 @@ def test_no_edge_facing_the_load_gives_up():
     assert plan.path.shape == (0, 2) and plan.target_edge == -1
 
 
-def test_start_inside_lor_climbs_out_or_gives_up_with_reason():
-    problem = problems.get("three_ledges")
-    mean = problem.prior.mean_vertices
-    start = 0.5 * (mean[40] + mean[41]) + np.array([0.0, 0.002])
+@pytest.mark.parametrize("edge", [5, 30, 60])
+def test_start_inside_lor_climbs_out_or_gives_up_with_reason(edge):
+    problem, samples, _ = _prior_plan("three_ledges")
+    mean = samples.mean(axis=0)
+    c, d = mean[problem.prior.edges[edge]]
+    normal = np.array([d[1] - c[1], c[0] - d[0]]) / np.linalg.norm(d - c)  # outward
+    start = 0.5 * (c + d) + 0.003 * normal  # 3 mm off the mean surface: inside the LOR
     _, _, plan = _prior_plan("three_ledges", start=start)
     assert plan.reason
     if plan.decision == "dock":
         assert np.allclose(plan.path[0], start)
-        assert not shapely.intersects(shapely.LineString(mean), shapely.LineString(plan.path[:-1]))
+        outline = shapely.LineString(mean)
+        assert not shapely.intersects(outline, shapely.LineString(plan.path[:-1]))
 
 
 def test_low_threshold_gap_gives_up():

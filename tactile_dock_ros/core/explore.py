@@ -37,6 +37,7 @@ class CycleLog:
     inference_seconds: float
     planning_seconds: float
     dropped: int  # observations the sampler ignored as inconsistent
+    history_length: int  # observations available when this cycle planned
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,7 @@ def run_episode(
                 inference_seconds=t1 - t0,
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
+                history_length=len(history),
             )
             if decision.decision == "give_up":
                 log.append(

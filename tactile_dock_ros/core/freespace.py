@@ -64,6 +64,9 @@ class FreeSpace:
     def __init__(self, lor, mean_vertices: np.ndarray, closed: bool, start: np.ndarray):
         mean_vertices = np.asarray(mean_vertices, float)
         self.outline = (shapely.LinearRing if closed else shapely.LineString)(mean_vertices)
+        ring = np.vstack([mean_vertices, mean_vertices[:1]]) if closed else mean_vertices
+        self._seg_a, self._seg_d = ring[:-1], np.diff(ring, axis=0)
+        self._seg_u = self._seg_d / np.maximum(np.sum(self._seg_d**2, axis=1), 1e-300)[:, None]
         solid = solid_region(mean_vertices, closed)
         obstacles = lor if solid is None else shapely.union(lor, solid)
         obstacles = shapely.simplify(
@@ -88,7 +91,14 @@ class FreeSpace:
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """(k,) distance in metres from each point (k, 2) to the mean shape's outline."""
         p = np.asarray(points, float).reshape(-1, 2)
-        return shapely.distance(self.outline, shapely.points(p))
+        out = np.empty(len(p))
+        for lo in range(0, len(p), 4096):  # chunks bound the (chunk, segments) work arrays
+            q = p[lo : lo + 4096, None, :] - self._seg_a
+            s = np.clip(np.einsum("psk,sk->ps", q, self._seg_u), 0.0, 1.0)
+            out[lo : lo + 4096] = np.sqrt(
+                np.min(np.sum((q - s[:, :, None] * self._seg_d) ** 2, axis=2), axis=1)
+            )
+        return out
 
     def touches_outline(self, path: np.ndarray) -> bool:
         """Whether the polyline (L, 2) meets the mean shape's outline (L = 1: the point)."""

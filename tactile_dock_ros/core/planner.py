@@ -117,11 +117,17 @@ def terminal_segments(
     facing = normal @ load < -_MIN_FACING
     idx = np.flatnonzero(facing)
     aim = 0.5 * (c[idx] + d[idx])
+    if len(idx) == 0:
+        empty = np.zeros((0, 2))
+        return dict(edges=idx, aim=empty, start=empty, end=empty, needs_exit=np.zeros(0, bool))
     x0, y0, x1, y1 = space.free.bounds
     reach = np.hypot(x1 - x0, y1 - y0)
     t = step * np.arange(1, min(_MAX_RAY_STEPS, int(np.ceil(reach / step))) + 1)
     ray = aim[:, None, :] - t[None, :, None] * load  # (C, K, 2)
     blocked = space.blocked(ray.reshape(-1, 2)).reshape(ray.shape[:2])
+    # Only the stretch up to the latest first exit matters: trim before measuring clearance.
+    last = int(np.where(blocked.all(axis=1), len(t) - 1, np.argmin(blocked, axis=1)).max()) + 1
+    t, ray, blocked = t[:last], ray[:, :last], blocked[:, :last]
     clear = space.clearance(ray.reshape(-1, 2)).reshape(ray.shape[:2])
     gaining = np.diff(np.concatenate([np.zeros((len(idx), 1)), clear], axis=1), axis=1) > 0
     k_stall = np.where(gaining.all(axis=1), len(t), np.argmin(gaining, axis=1))

@@ -135,10 +135,10 @@ def _notch() -> Problem:
             outline=[
                 (-0.3, -0.3),
                 (-0.3, 0.25),
-                (-0.04, 0.07),
-                (-0.02, 0.04),
-                (0.03, 0.05),
-                (0.3, -0.14),
+                (-0.04, 0.06),
+                (-0.02, 0.045),
+                (0.02, 0.05),
+                (0.3, -0.16),
                 (0.3, -0.3),
             ],
             n_vertices=24,
@@ -146,34 +146,42 @@ def _notch() -> Problem:
             friction=0.5,
             start=(0.0, 0.45),
             sensor=(0.8, -0.6),
-            sigma_hidden=0.01,
+            sigma_hidden=0.012,
+            hidden_length=0.03,
         ),
     )
 
 
 def _three_ledges() -> Problem:
-    """Three ledges on a wall (Fig. 11): 82 vertices, 81 edges, hidden ledge tops."""
+    """Three ledges on a wall (Fig. 11): 82 vertices, 81 edges, hidden ledge tops.
+
+    Every top slopes outward at 30 degrees, just beyond the friction angle (26.6 degrees for
+    mu = 0.5), and its shape is hidden from the camera: smooth deviations (8 mm, 6 cm) tilt
+    single edges by several degrees, so whether and where a top holds is uncertain. The risers
+    overhang slightly, so the valleys at their feet are out of reach of a straight push.
+    """
     return _build(
         "three_ledges",
         _Spec(
             outline=[
-                (-0.6, -0.4),
+                (-0.6, -0.45),
                 (-0.6, 0.5),
-                (-0.42, 0.47),  # ledge 1: top slopes outward, marginal
-                (-0.4, 0.3),
-                (-0.22, 0.31),  # ledge 2: flat top with a lip
-                (-0.2, 0.34),
-                (-0.18, 0.12),
-                (0.0, 0.05),  # ledge 3: slopes outward more steeply
-                (0.02, -0.1),
-                (0.3, -0.2),
-                (0.3, -0.4),
+                (-0.4, 0.385),  # ledge 1 lip
+                (-0.42, 0.26),
+                (-0.2, 0.133),  # ledge 2 lip
+                (-0.22, 0.05),
+                (0.0, -0.077),  # ledge 3 lip
+                (-0.02, -0.15),
+                (0.3, -0.335),
+                (0.3, -0.45),
             ],
             n_vertices=82,
             load=(0.0, -1.0),
             friction=0.5,
             start=(0.2, 0.7),
             sensor=(0.9, -0.8),
+            sigma_hidden=0.008,
+            hidden_length=0.06,
         ),
     )
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
+    "docking": "Fig. 13: ours vs growing window vs info gain, cycles and success per problem",
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
