@@ -1,5 +1,7 @@
 """bvn.quadrant against scipy's bivariate normal CDF, identities and bad input."""
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -92,3 +94,14 @@ def test_infinite_limits():
 def test_bad_input(args):
     with pytest.raises(ValueError):
         bvn.quadrant(*args)
+
+
+def test_far_tails_with_strong_correlation_are_exact_and_warning_free():
+    """|h k| in the thousands (a far-away edge) must not overflow inside the expansion."""
+    h = np.array([-2000.0, 50.0, -40.0])
+    k = np.array([2000.0, -60.0, 45.0])
+    rho = np.array([0.95, -0.97, 0.99])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        p = bvn.quadrant(h, k, rho)
+    np.testing.assert_array_equal(p, [0.0, 0.0, 0.0])

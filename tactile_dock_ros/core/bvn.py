@@ -57,8 +57,8 @@ def _upper_strong(h: np.ndarray, k: np.ndarray, r: np.ndarray) -> np.ndarray:
             * (1.0 - c * (b_sq - a_sq) * (1.0 - d * b_sq / 5.0) / 3.0 + c * d * a_sq * a_sq / 5.0)
         )
         b = np.sqrt(b_sq)
-        tail = (
-            np.exp(-hki / 2.0)
+        tail = (  # dropped below hk = -160; the clip only keeps exp finite there
+            np.exp(-np.maximum(hki, -160.0) / 2.0)
             * np.sqrt(_TWO_PI)
             * ndtr(-b / a)
             * b
