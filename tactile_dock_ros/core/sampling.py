@@ -88,7 +88,7 @@ def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
     such segment. Only the ``live`` (C, P) pairs are evaluated: every other pair keeps the sign
     of its value ``base`` (C, P) at the window start throughout the window (``live_pairs``),
     so observations without live pairs stay satisfied and only the others are reduced.
-    Small systems (< WINDOW_MIN_PRIMITIVES primitives) evaluate every primitive: fewer numpy
+    Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every primitive: fewer numpy
     calls. Chunked: the first exit is usually among the first few roots."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
@@ -96,7 +96,7 @@ def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
     ci, pj = np.nonzero(live)
     if ci.size == 0:
         return hit, first
-    if system.n_prims < WINDOW_MIN_PRIMITIVES:
+    if system.n_prims <= WINDOW_MIN_PRIMITIVES:
 
         def violated(rows, span):
             g = np.matmul(trig_basis(mids[rows, span]), coef[rows].swapaxes(1, 2))
