@@ -88,31 +88,42 @@ def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
     such segment. Only the ``live`` (C, P) pairs are evaluated: every other pair keeps the sign
     of its value ``base`` (C, P) at the window start throughout the window (``live_pairs``),
     so observations without live pairs stay satisfied and only the others are reduced.
-    Chunked: the first exit is usually among the first few roots."""
+    Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every primitive: fewer numpy
+    calls. Chunked: the first exit is usually among the first few roots."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
     first = np.zeros(c, dtype=int)
     ci, pj = np.nonzero(live)
     if ci.size == 0:
         return hit, first
-    columns = system.observation_columns(pj)
-    at_column = np.searchsorted(columns, pj)
-    prims = system.pair_prims[pj]  # (R, 6)
-    inactive = (prims < 0)[:, None]
-    pair_coef = coef[ci[:, None], np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
-    base = base[:, columns]
+    if system.n_prims <= WINDOW_MIN_PRIMITIVES:
+
+        def violated(rows, span):
+            g = np.matmul(trig_basis(mids[rows, span]), coef[rows].swapaxes(1, 2))
+            return np.any(system.violations(g) > 0, axis=-1)
+
+    else:
+        columns = system.observation_columns(pj)
+        at_column = np.searchsorted(columns, pj)
+        prims = system.pair_prims[pj]  # (R, 6)
+        inactive = (prims < 0)[:, None]
+        pair_coef = coef[ci[:, None], np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
+        base = base[:, columns]
+
+        def violated(rows, span):
+            values = np.repeat(base[rows, None], len(range(n_seg)[span]), axis=1)  # (r, s, P')
+            sel = np.flatnonzero(~hit[ci])
+            at_row = np.cumsum(~hit)[ci[sel]] - 1  # position of the live pair's chain in rows
+            g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])
+            g = np.where(inactive[sel], -np.inf, g)
+            values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
+            return np.any(system.reduce_columns(values, columns) > 0, axis=-1)
+
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
         rows = np.flatnonzero(~hit)
         if rows.size == 0:
             break
-        width = min(chunk, n_seg - lo)
-        values = np.repeat(base[rows, None], width, axis=1)  # (r, s, columns)
-        sel = np.flatnonzero(~hit[ci])
-        at_row = np.cumsum(~hit)[ci[sel]] - 1  # position of the live pair's chain in rows
-        g = np.matmul(trig_basis(mids[ci[sel], lo : lo + width]), pair_coef[sel])
-        g = np.where(inactive[sel], -np.inf, g)
-        values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
-        bad = np.any(system.reduce_columns(values, columns) > 0, axis=-1)
+        bad = violated(rows, slice(lo, lo + chunk))
         found = bad.any(axis=1)
         hit[rows[found]] = True
         first[rows[found]] = lo + np.argmax(bad[found], axis=1)

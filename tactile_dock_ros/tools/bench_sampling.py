@@ -166,6 +166,39 @@ def _bridge(args) -> dict:
     return summary
 
 
+def _warm_start(args) -> dict:
+    """The planner's case: 100 HMC samples on three_ledges after n probes, cold and warm-started
+    (``init_z``) from 100 samples of the posterior before the last probe. Medians of seconds."""
+    print("\nthree_ledges, 100 HMC samples after the last probe: cold vs warm start (init_z)")
+    print(f"{'probes':>6} {'cold s':>8} {'warm s':>8} {'warm seeds':>10}")
+    out = {}
+    for n_probes in (5, 10, 15):
+        problem, history, _ = three_ledges_after_probes(n_probes, seed=args.seed)
+        before = history.subset(np.arange(len(history) - 2))  # without the last probe
+        runs = []
+        for rep in range(args.repeats):
+            rng = np.random.default_rng(args.seed + 1000 * rep + 29)
+            prev = sample_posterior(problem.prior, before, 100, rng)
+            cold = sample_posterior(problem.prior, history, 100, rng)
+            warm = sample_posterior(problem.prior, history, 100, rng, init_z=prev.z)
+            for out_ in (cold, warm):
+                assert history_consistent(False, out_.vertices, history, problem.friction).all()
+            runs.append(
+                {
+                    "cold_seconds": cold.seconds,
+                    "warm_seconds": warm.seconds,
+                    "warm_seeds": warm.info["warm_seeds"],
+                }
+            )
+        med = {k: _median([r[k] for r in runs]) for k in runs[0]}
+        out[f"{n_probes}_probes"] = {"median": med, "runs": runs}
+        print(
+            f"{n_probes:>6} {med['cold_seconds']:>8.3f} {med['warm_seconds']:>8.3f} "
+            f"{med['warm_seeds']:>10.0f}"
+        )
+    return out
+
+
 def run(args) -> dict:
     print("Posterior sampling benchmark (wall times on this machine; medians over repeats)")
     problems_out = {}
@@ -190,4 +223,4 @@ def run(args) -> dict:
         METHODS,
         args.ledges_max_draws,
     )
-    return {"problems": problems_out, "bridge": _bridge(args)}
+    return {"problems": problems_out, "warm_start": _warm_start(args), "bridge": _bridge(args)}
