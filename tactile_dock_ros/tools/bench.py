@@ -5,10 +5,17 @@
 Each suite is a module ``tactile_dock_ros.tools.bench_<suite>`` with ``add_arguments(parser)``
 and ``run(args) -> dict``; ``run`` prints a human-readable table as it goes and returns the
 JSON-serializable results, which are written to ``--json`` (and always include the command
-line, the machine and the software versions).
+line, the machine and the software versions). BLAS runs single-threaded unless
+OPENBLAS_NUM_THREADS is set.
 """
 
 from __future__ import annotations
+
+import os
+
+# Benchmarks measure one core: multi-threaded BLAS on these small matrix products only adds
+# contention (set before numpy is first imported; an explicit setting in the shell wins).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import importlib
