@@ -87,33 +87,45 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
     deterministically related, e.g. when a single rotation drives all four conditions of (7-10).
     Zero-variance conditions count as certain (mean >= 0) or impossible; k steps, k = 4 here.
     """
-    mu = np.array(mean, dtype=float)
-    sig = np.array(cov, dtype=float)
-    k = len(mu)
-    done = np.zeros(mu.shape, dtype=bool)
-    total = np.ones(mu.shape[1:])
+    mean = np.asarray(mean, dtype=float)
+    k, batch = len(mean), mean.shape[1:]
+    flat_mean = np.moveaxis(mean.reshape(k, -1), 0, -1)  # (M, k)
+    flat_cov = np.moveaxis(np.asarray(cov, dtype=float).reshape(k, k, -1), -1, 0)  # (M, k, k)
+    return _orthant_rows(flat_mean, flat_cov).reshape(batch)
+
+
+def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
+    """``positive_orthant_sequential`` on rows: mean (M, k), cov (M, k, k) -> (M,).
+
+    The least likely condition is the one with the smallest standardized mean h (log_ndtr is
+    increasing), so only the chosen condition's probability is evaluated per step.
+    """
+    mu, sig = mu.copy(), sig.copy()
+    count, k = mu.shape
+    rows = np.arange(count)
+    done = np.zeros((count, k), dtype=bool)
+    total = np.ones(count)
     for _ in range(k):
-        h = _standardize(mu, np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)))
-        log_p = np.where(done, np.inf, log_ndtr(h))
-        j = np.argmin(log_p, axis=0)[None]  # least likely condition first
-        hj = np.take_along_axis(h, j, 0)[0]
-        total = total * np.exp(np.take_along_axis(log_p, j, 0)[0])
-        var_j = np.take_along_axis(
-            np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)), j, 0
-        )[0]
+        var = np.diagonal(sig, axis1=1, axis2=2)
+        h = _standardize(mu, var)
+        # done conditions last; +inf (certain) ones still before them
+        j = np.argmin(np.where(done, np.inf, np.minimum(h, np.finfo(float).max)), axis=1)
+        hj, var_j = h[rows, j], var[rows, j]
         finite = np.isfinite(hj)
         hj_fin = np.where(finite, hj, 0.0)
-        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_ndtr(hj_fin))
+        log_pj = log_ndtr(hj_fin)
+        total = total * np.exp(np.where(finite, log_pj, np.where(hj > 0, 0.0, -np.inf)))
+        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_pj)
         mills = np.where(finite, mills, 0.0)
         sd_j = np.sqrt(np.maximum(var_j, 0.0))
         shift = sd_j * mills  # truncated mean minus mean
         shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
-        col = np.take_along_axis(sig, np.broadcast_to(j[None], (k, *j.shape)), 1)[:, 0]  # S_.j
+        col = sig[rows, :, j]  # (M, k): S_.j
         with np.errstate(divide="ignore", invalid="ignore"):
-            gain = np.where(var_j > 0, col / var_j, 0.0)
-        mu = mu + gain * shift
-        sig = sig - gain[:, None] * gain[None, :] * shrink
-        np.put_along_axis(done, j, True, 0)
+            gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
+        mu = mu + gain * shift[:, None]
+        sig = sig - gain[:, :, None] * gain[:, None, :] * shrink[:, None, None]
+        done[rows, j] = True
     return np.clip(total, 0.0, 1.0)
 
 
@@ -181,35 +193,59 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     return np.where(still, 0.0, p)
 
 
+# Per loading-move event: the two friction functionals of t (rows of friction_functionals) and
+# their signs in "must be >= 0" form (Sec. V-A1): stick, slide left, slide right.
+_EVENT_ROWS = np.array([[L_, R_], [L_, N_], [R_, N_]])
+_EVENT_SIGNS = np.array([[-1.0, -1.0], [1.0, 1.0], [1.0, 1.0]])
+# Contacts whose bound (the least likely of their single conditions) is below this are skipped.
+PRUNE_BELOW = 1e-12
+
+
 def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
     stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
-    conditioning, so the dependence between where the edge lies and how it is tilted is kept."""
+    conditioning, so the dependence between where the edge lies and how it is tilted is kept.
+
+    Pruning (Sec. IV-F): an event is no likelier than its least likely single condition; events
+    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 7 x 7
+    covariance of the four collision and three friction conditions is formed once per surviving
+    (move, edge) pair, and all surviving events go through one batched orthant evaluation.
+    """
     means, covs = shape.edge_gaussians()
     values, grads, still = _collision_conditions(a, b, means)
-    w = friction_functionals(load, shape.friction)
-    rows = {  # the two extra "must be >= 0" functionals of t per event
-        "stick": (-w[L_], -w[R_]),
-        "left": (w[L_], w[N_]),
-        "right": (w[R_], w[N_]),
-    }
-    mean_t = means[:, 2:] - means[:, :2]
-    shape_ke = values.shape[1:]
-    edge_of = np.broadcast_to(np.arange(len(means)), shape_ke)
-    # Prune (Sec. IV-F): a contact no likelier than its least likely condition, here < 1e-12.
+    w = friction_functionals(load, shape.friction)  # (3, 2)
     var = np.einsum("iked,edf,ikef->ike", grads, covs, grads)
-    live = (np.min(ndtr(_standardize(values, var)), axis=0) > 1e-12) & ~still
-    e_live = edge_of[live]
-    v_live, g_live = values[:, live], grads[:, live]  # (4, M), (4, M, 4)
-    out = np.zeros((3, *shape_ke))
-    for slot, pair in enumerate(rows.values()):
-        extra_v = np.stack([mean_t[e_live] @ f for f in pair])
-        extra_g = np.stack(
-            [np.broadcast_to(np.concatenate([-f, f]), g_live.shape[1:]) for f in pair]
-        )
-        g = np.concatenate([g_live, extra_g])
-        cov_g = np.einsum("imd,mdf,jmf->ijm", g, covs[e_live], g)
-        out[slot][live] = positive_orthant_sequential(np.concatenate([v_live, extra_v]), cov_g)
+    bound = np.where(still, 0.0, np.min(ndtr(_standardize(values, var)), axis=0))  # (K, E)
+    # (E, 3) P(w_r . t >= 0) and P(w_r . t <= 0) per friction row r
+    fric_grad = np.concatenate([-w, w], axis=1)  # (3, 4): gradient of w_r . (d - c) in (c, d)
+    fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 3)
+    fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
+    p_pos = ndtr(_standardize(fric_mean, fric_var))
+    p_neg = ndtr(_standardize(-fric_mean, fric_var))
+    p_side = np.stack([p_neg, p_pos])  # (2, E, 3): sign -1, +1
+    sign_idx = (_EVENT_SIGNS > 0).astype(int)
+    event_bound = np.minimum(  # (3, E): bound of the two friction conditions of each event
+        p_side[sign_idx[:, 0], :, _EVENT_ROWS[:, 0]], p_side[sign_idx[:, 1], :, _EVENT_ROWS[:, 1]]
+    )
+    live = np.minimum(bound[None], event_bound[:, None, :]) > PRUNE_BELOW  # (3, K, E)
+    pair_live = live.any(axis=0)
+    k_idx, e_idx = np.nonzero(pair_live)
+    g7 = np.concatenate(  # (M, 7, 4): conditions I-IV, then the friction rows L, R, N
+        [np.moveaxis(grads[:, k_idx, e_idx], 0, 1), np.broadcast_to(fric_grad, (len(k_idx), 3, 4))],
+        axis=1,
+    )
+    v7 = np.concatenate([values[:, k_idx, e_idx].T, fric_mean[e_idx]], axis=1)  # (M, 7)
+    c7 = g7 @ covs[e_idx] @ np.swapaxes(g7, 1, 2)  # (M, 7, 7)
+    # every live event: its pair's row in the 7-condition arrays, and its 6 signed conditions
+    slot, pos = np.nonzero(live[:, pair_live])
+    pick = np.concatenate([np.broadcast_to(np.arange(4), (3, 4)), 4 + _EVENT_ROWS], axis=1)[slot]
+    sign = np.concatenate([np.ones((3, 4)), _EVENT_SIGNS], axis=1)[slot]  # (S, 6)
+    v6 = v7[pos[:, None], pick] * sign
+    c6 = c7[pos[:, None, None], pick[:, :, None], pick[:, None, :]] * (
+        sign[:, :, None] * sign[:, None, :]
+    )
+    out = np.zeros((3, *bound.shape))
+    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
     return out
 
 
