@@ -44,6 +44,7 @@ from .simulate import cross, edge_index_arrays, friction_functionals, unit
 
 METHODS = ("bivariate", "univariate", "sequential")
 L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
+_HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
 
 @dataclass(frozen=True)
@@ -105,17 +106,20 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
     rows = np.arange(count)
     done = np.zeros((count, k), dtype=bool)
     total = np.ones(count)
-    for _ in range(k):
+    for step in range(k):
         var = np.diagonal(sig, axis1=1, axis2=2)
         h = _standardize(mu, var)
-        # done conditions last; +inf (certain) ones still before them
-        j = np.argmin(np.where(done, np.inf, np.minimum(h, np.finfo(float).max)), axis=1)
+        key = np.minimum(h, np.finfo(float).max)  # certain (+inf) conditions before done ones
+        key[done] = np.inf
+        j = np.argmin(key, axis=1)
         hj, var_j = h[rows, j], var[rows, j]
         finite = np.isfinite(hj)
         hj_fin = np.where(finite, hj, 0.0)
         log_pj = log_ndtr(hj_fin)
         total = total * np.exp(np.where(finite, log_pj, np.where(hj > 0, 0.0, -np.inf)))
-        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_pj)
+        if step == k - 1:  # nothing left to condition
+            break
+        mills = np.exp(-0.5 * hj_fin**2 - _HALF_LOG_2PI - log_pj)
         mills = np.where(finite, mills, 0.0)
         sd_j = np.sqrt(np.maximum(var_j, 0.0))
         shift = sd_j * mills  # truncated mean minus mean
@@ -123,8 +127,10 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
         col = sig[rows, :, j]  # (M, k): S_.j
         with np.errstate(divide="ignore", invalid="ignore"):
             gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
-        mu = mu + gain * shift[:, None]
-        sig = sig - gain[:, :, None] * gain[:, None, :] * shrink[:, None, None]
+        mu += gain * shift[:, None]
+        update = gain[:, :, None] * gain[:, None, :]
+        update *= shrink[:, None, None]
+        sig -= update
         done[rows, j] = True
     return np.clip(total, 0.0, 1.0)
 
@@ -240,10 +246,9 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     slot, pos = np.nonzero(live[:, pair_live])
     pick = np.concatenate([np.broadcast_to(np.arange(4), (3, 4)), 4 + _EVENT_ROWS], axis=1)[slot]
     sign = np.concatenate([np.ones((3, 4)), _EVENT_SIGNS], axis=1)[slot]  # (S, 6)
-    v6 = v7[pos[:, None], pick] * sign
-    c6 = c7[pos[:, None, None], pick[:, :, None], pick[:, None, :]] * (
-        sign[:, :, None] * sign[:, None, :]
-    )
+    v6 = np.take(v7, pos[:, None] * 7 + pick) * sign
+    flat6 = (pos * 49)[:, None, None] + pick[:, :, None] * 7 + pick[:, None, :]  # into c7
+    c6 = np.take(c7, flat6) * (sign[:, :, None] * sign[:, None, :])
     out = np.zeros((3, *bound.shape))
     out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
     return out
