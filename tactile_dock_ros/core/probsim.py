@@ -140,18 +140,22 @@ def _check_shape(shape: GaussianShape) -> None:
         raise TypeError(f"shape must be a GaussianShape, got {type(shape).__name__}")
 
 
-def _collision_conditions(a, b, means):
-    """Conditions (7-10) for moves a, b (K, 2) against edge means (E, 4), as functions of
-    y = (c, d) that must be >= 0: values at the mean (4, K, E) and gradients (4, K, E, 4).
+def _move_endpoints(a, b) -> tuple[np.ndarray, np.ndarray]:
+    """Moves as finite (K, 2) arrays; ValueError otherwise."""
+    a = np.asarray(a, dtype=float).reshape(-1, 2)
+    b = np.asarray(b, dtype=float).reshape(-1, 2)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError("move endpoints must be finite")
+    return a, b
+
+
+def _conditions(a, b, c, d):
+    """Conditions (7-10) for move a -> b and edge y = (c, d), all broadcastable (..., 2), as
+    functions of y that must be >= 0: values at the mean (4, ...) and gradients (4, ..., 4).
 
     (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
     about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
     """
-    a = np.asarray(a, dtype=float).reshape(-1, 1, 2)
-    b = np.asarray(b, dtype=float).reshape(-1, 1, 2)
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-        raise ValueError("move endpoints must be finite")
-    c, d = means[None, :, :2], means[None, :, 2:]
     move = b - a
     zero = np.zeros(np.broadcast_shapes(c.shape, a.shape)[:-1])
     values = np.stack(
@@ -173,7 +177,15 @@ def _collision_conditions(a, b, means):
             np.stack([zero, zero, my, -mx], axis=-1),
         ]
     )
-    still = np.linalg.norm(move, axis=-1) == 0.0  # (K, 1)
+    return values, grads
+
+
+def _collision_conditions(a, b, means):
+    """``_conditions`` for every pair of moves a, b (K, 2) and edge means (E, 4): values
+    (4, K, E), gradients (4, K, E, 4) and the zero-length moves (K, 1)."""
+    a, b = _move_endpoints(a, b)
+    values, grads = _conditions(a[:, None], b[:, None], means[None, :, :2], means[None, :, 2:])
+    still = np.linalg.norm(b - a, axis=-1)[:, None] == 0.0
     return values, grads, still
 
 
@@ -218,29 +230,53 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     (move, edge) pair, and all surviving events go through one batched orthant evaluation.
     """
     means, covs = shape.edge_gaussians()
-    values, grads, still = _collision_conditions(a, b, means)
+    a, b = _move_endpoints(a, b)
     w = friction_functionals(load, shape.friction)  # (3, 2)
-    var = np.einsum("iked,edf,ikef->ike", grads, covs, grads)
-    bound = np.where(still, 0.0, np.min(ndtr(_standardize(values, var)), axis=0))  # (K, E)
     # (E, 3) P(w_r . t >= 0) and P(w_r . t <= 0) per friction row r
     fric_grad = np.concatenate([-w, w], axis=1)  # (3, 4): gradient of w_r . (d - c) in (c, d)
     fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 3)
     fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
-    p_pos = ndtr(_standardize(fric_mean, fric_var))
-    p_neg = ndtr(_standardize(-fric_mean, fric_var))
-    p_side = np.stack([p_neg, p_pos])  # (2, E, 3): sign -1, +1
+    p_side = np.stack(  # (2, E, 3): sign -1, +1
+        [ndtr(_standardize(-fric_mean, fric_var)), ndtr(_standardize(fric_mean, fric_var))]
+    )
     sign_idx = (_EVENT_SIGNS > 0).astype(int)
     event_bound = np.minimum(  # (3, E): bound of the two friction conditions of each event
         p_side[sign_idx[:, 0], :, _EVENT_ROWS[:, 0]], p_side[sign_idx[:, 1], :, _EVENT_ROWS[:, 1]]
     )
-    live = np.minimum(bound[None], event_bound[:, None, :]) > PRUNE_BELOW  # (3, K, E)
+    # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
+    # +-perp(b - a), so their variances need only the 2 x 2 endpoint blocks.
+    move = b - a
+    perp = np.stack([-move[:, 1], move[:, 0]], axis=1)  # (K, 2)
+    lin_values = np.stack(
+        [
+            cross(move[:, None], means[None, :, :2] - a[:, None]),
+            cross(move[:, None], a[:, None] - means[None, :, 2:]),
+        ]
+    )
+    lin_var = np.stack(
+        [np.einsum("kd,edf,kf->ke", perp, covs[:, i : i + 2, i : i + 2], perp) for i in (0, 2)]
+    )
+    still = (np.linalg.norm(move, axis=1) == 0.0)[:, None]
+    keep = (np.min(ndtr(_standardize(lin_values, lin_var)), axis=0) > PRUNE_BELOW) & ~still
+    keep &= event_bound.max(axis=0)[None] > PRUNE_BELOW
+    k_idx, e_idx = np.nonzero(keep)
+    # Second pass on the survivors: all four conditions.
+    values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
+    var = np.einsum("imd,mdf,imf->im", grads, covs[e_idx], grads)
+    bound = np.min(ndtr(_standardize(values, var)), axis=0)  # (M,)
+    live = np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW  # (3, M)
     pair_live = live.any(axis=0)
-    k_idx, e_idx = np.nonzero(pair_live)
+    k_idx, e_idx, values, grads = (
+        k_idx[pair_live],
+        e_idx[pair_live],
+        values[:, pair_live],
+        grads[:, pair_live],
+    )
     g7 = np.concatenate(  # (M, 7, 4): conditions I-IV, then the friction rows L, R, N
-        [np.moveaxis(grads[:, k_idx, e_idx], 0, 1), np.broadcast_to(fric_grad, (len(k_idx), 3, 4))],
+        [np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (len(k_idx), 3, 4))],
         axis=1,
     )
-    v7 = np.concatenate([values[:, k_idx, e_idx].T, fric_mean[e_idx]], axis=1)  # (M, 7)
+    v7 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 7)
     c7 = g7 @ covs[e_idx] @ np.swapaxes(g7, 1, 2)  # (M, 7, 7)
     # every live event: its pair's row in the 7-condition arrays, and its 6 signed conditions
     slot, pos = np.nonzero(live[:, pair_live])
@@ -249,7 +285,7 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     v6 = np.take(v7, pos[:, None] * 7 + pick) * sign
     flat6 = (pos * 49)[:, None, None] + pick[:, :, None] * 7 + pick[:, None, :]  # into c7
     c6 = np.take(c7, flat6) * (sign[:, :, None] * sign[:, None, :])
-    out = np.zeros((3, *bound.shape))
+    out = np.zeros((3, len(a), len(means)))
     out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
     return out
 
