@@ -211,10 +211,12 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     return np.where(still, 0.0, p)
 
 
-# Per loading-move event: the two friction functionals of t (rows of friction_functionals) and
-# their signs in "must be >= 0" form (Sec. V-A1): stick, slide left, slide right.
-_EVENT_ROWS = np.array([[L_, R_], [L_, N_], [R_, N_]])
-_EVENT_SIGNS = np.array([[-1.0, -1.0], [1.0, 1.0], [1.0, 1.0]])
+# Friction conditions of the loading-move events in "must be >= 0" form (Sec. V-A1), as signed
+# rows of simulate.friction_functionals: -wL, -wR (stick), wL, wN (slide left), wR (slide right).
+_FRICTION_ROWS = np.array([L_, R_, L_, N_, R_])
+_FRICTION_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0, 1.0])
+# Per event (stick, slide left, slide right): its 6 conditions among the 9 = (7-10) + the above.
+_EVENT_PICK = np.array([[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 6, 7], [0, 1, 2, 3, 8, 7]])
 # Contacts whose bound (the least likely of their single conditions) is below this are skipped.
 PRUNE_BELOW = 1e-12
 
@@ -231,18 +233,12 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     """
     means, covs = shape.edge_gaussians()
     a, b = _move_endpoints(a, b)
-    w = friction_functionals(load, shape.friction)  # (3, 2)
-    # (E, 3) P(w_r . t >= 0) and P(w_r . t <= 0) per friction row r
-    fric_grad = np.concatenate([-w, w], axis=1)  # (3, 4): gradient of w_r . (d - c) in (c, d)
-    fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 3)
+    w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
+    fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
+    fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 5)
     fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
-    p_side = np.stack(  # (2, E, 3): sign -1, +1
-        [ndtr(_standardize(-fric_mean, fric_var)), ndtr(_standardize(fric_mean, fric_var))]
-    )
-    sign_idx = (_EVENT_SIGNS > 0).astype(int)
-    event_bound = np.minimum(  # (3, E): bound of the two friction conditions of each event
-        p_side[sign_idx[:, 0], :, _EVENT_ROWS[:, 0]], p_side[sign_idx[:, 1], :, _EVENT_ROWS[:, 1]]
-    )
+    p_fric = ndtr(_standardize(fric_mean, fric_var))
+    event_bound = np.min(p_fric[:, _EVENT_PICK[:, 4:] - 4], axis=2).T  # (3, E)
     # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
     # +-perp(b - a), so their variances need only the 2 x 2 endpoint blocks.
     move = b - a
@@ -260,31 +256,18 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     keep = (np.min(ndtr(_standardize(lin_values, lin_var)), axis=0) > PRUNE_BELOW) & ~still
     keep &= event_bound.max(axis=0)[None] > PRUNE_BELOW
     k_idx, e_idx = np.nonzero(keep)
-    # Second pass on the survivors: all four conditions.
+    # Second pass on the survivors: the 9 x 9 covariance of all conditions, once per pair.
     values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
-    var = np.einsum("imd,mdf,imf->im", grads, covs[e_idx], grads)
-    bound = np.min(ndtr(_standardize(values, var)), axis=0)  # (M,)
-    live = np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW  # (3, M)
-    pair_live = live.any(axis=0)
-    k_idx, e_idx, values, grads = (
-        k_idx[pair_live],
-        e_idx[pair_live],
-        values[:, pair_live],
-        grads[:, pair_live],
-    )
-    g7 = np.concatenate(  # (M, 7, 4): conditions I-IV, then the friction rows L, R, N
-        [np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (len(k_idx), 3, 4))],
-        axis=1,
-    )
-    v7 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 7)
-    c7 = g7 @ covs[e_idx] @ np.swapaxes(g7, 1, 2)  # (M, 7, 7)
-    # every live event: its pair's row in the 7-condition arrays, and its 6 signed conditions
-    slot, pos = np.nonzero(live[:, pair_live])
-    pick = np.concatenate([np.broadcast_to(np.arange(4), (3, 4)), 4 + _EVENT_ROWS], axis=1)[slot]
-    sign = np.concatenate([np.ones((3, 4)), _EVENT_SIGNS], axis=1)[slot]  # (S, 6)
-    v6 = np.take(v7, pos[:, None] * 7 + pick) * sign
-    flat6 = (pos * 49)[:, None, None] + pick[:, :, None] * 7 + pick[:, None, :]  # into c7
-    c6 = np.take(c7, flat6) * (sign[:, :, None] * sign[:, None, :])
+    count = len(k_idx)
+    g9 = np.concatenate([np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (count, 5, 4))], 1)
+    v9 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 9)
+    c9 = g9 @ covs[e_idx] @ np.swapaxes(g9, 1, 2)  # (M, 9, 9)
+    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4]
+    bound = np.min(ndtr(_standardize(values.T, var)), axis=1)  # (M,)
+    slot, pos = np.nonzero(np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW)
+    pick = _EVENT_PICK[slot]  # (S, 6) rows of each live event
+    v6 = np.take(v9, (pos * 9)[:, None] + pick)
+    c6 = np.take(c9, (pos * 81)[:, None, None] + pick[:, :, None] * 9 + pick[:, None, :])
     out = np.zeros((3, len(a), len(means)))
     out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
     return out
