@@ -104,14 +104,13 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
     mu, sig = mu.copy(), sig.copy()
     count, k = mu.shape
     rows = np.arange(count)
-    done = np.zeros((count, k), dtype=bool)
     total = np.ones(count)
     for step in range(k):
         var = np.diagonal(sig, axis1=1, axis2=2)
         h = _standardize(mu, var)
-        key = np.minimum(h, np.finfo(float).max)  # certain (+inf) conditions before done ones
-        key[done] = np.inf
-        j = np.argmin(key, axis=1)
+        # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
+        # whichever is picked changes nothing (factor 1, zero shift and shrink).
+        j = np.argmin(h, axis=1)
         hj, var_j = h[rows, j], var[rows, j]
         finite = np.isfinite(hj)
         hj_fin = np.where(finite, hj, 0.0)
@@ -131,7 +130,7 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
         update = gain[:, :, None] * gain[:, None, :]
         update *= shrink[:, None, None]
         sig -= update
-        done[rows, j] = True
+        mu[rows, j] = np.inf  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
 
