@@ -301,33 +301,34 @@ def _vertex_transitions(shape: GaussianShape, terms: dict):
     el, er = left[inner], right[inner]
     mean, cov, fb = terms["mean"], terms["cov"], terms["basis"]
     cross_cov = fb[el] @ np.swapaxes(fb[er], 1, 2)  # (V, 3, 3): functional i of l, j of r
-
-    def pair(e1, i, e2, j, c12):
-        return _both_positive(mean[e1, i], cov[e1, i, i], mean[e2, j], cov[e2, j, j], c12)
-
-    def one(e, i):
-        return ndtr(_standardize(mean[e, i], cov[e, i, i]))
+    # Both slide directions at once: a left slide (row L_) arrives along r(v) = src and goes on
+    # to l(v) = dst; a right slide (row R_) the other way round. cov_ds (2V, 3, 3) is
+    # Cov(functional i of dst, functional j of src).
+    count = len(el)
+    src, dst = np.concatenate([er, el]), np.concatenate([el, er])
+    row = np.repeat([L_, R_], count)
+    face = np.full_like(row, N_)
+    cov_ds = np.concatenate([cross_cov, np.swapaxes(cross_cov, 1, 2)])
+    at = np.arange(2 * count)
+    # The three pair probabilities in one quadrant call: P(slide on dst, slide on src),
+    # P(slide on dst, dst faces the load), P(dst faces the load, slide on src).
+    e1, i1 = np.concatenate([dst, dst, dst]), np.concatenate([row, row, face])
+    e2, i2 = np.concatenate([src, dst, src]), np.concatenate([row, face, row])
+    c12 = np.concatenate([cov_ds[at, row, row], cov[dst, row, N_], cov_ds[at, N_, row]])
+    p_pair = _both_positive(mean[e1, i1], cov[e1, i1, i1], mean[e2, i2], cov[e2, i2, i2], c12)
+    both_slide, dst_slide_faces, faces_after = np.split(p_pair, 3)
+    e, i = np.concatenate([src, dst]), np.concatenate([row, row])
+    p_src, p_dst = np.split(ndtr(_standardize(mean[e, i], cov[e, i, i])), 2)
 
     def ratio(num, den):
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(den > 0, np.clip(num / den, 0.0, 1.0), 0.0)
 
-    def arrival(src, dst, row, cov_ds):
-        """Continue / stick on dst after sliding along src (row L_ or R_); cov_ds (V, 3, 3) is
-        Cov(functional i of dst, functional j of src)."""
-        p_src = one(src, row)
-        cont = ratio(pair(dst, row, src, row, cov_ds[:, row, row]), p_src) * ratio(
-            pair(dst, row, dst, N_, cov[dst, row, N_]), one(dst, row)
-        )
-        face = ratio(pair(dst, N_, src, row, cov_ds[:, N_, row]), p_src)
-        return cont, np.maximum(face - cont, 0.0)
-
+    cont = ratio(both_slide, p_src) * ratio(dst_slide_faces, p_dst)
+    stick = np.maximum(ratio(faces_after, p_src) - cont, 0.0)
     out = {k: np.zeros(n) for k in ("cont_left", "stick_left", "cont_right", "stick_right")}
-    # a left slide arrives along r(v) and goes on to l(v); a right slide the other way round
-    out["cont_left"][inner], out["stick_left"][inner] = arrival(er, el, L_, cross_cov)
-    out["cont_right"][inner], out["stick_right"][inner] = arrival(
-        el, er, R_, np.swapaxes(cross_cov, 1, 2)
-    )
+    out["cont_left"][inner], out["cont_right"][inner] = np.split(cont, 2)
+    out["stick_left"][inner], out["stick_right"][inner] = np.split(stick, 2)
     return out
 
 
