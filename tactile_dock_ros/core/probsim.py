@@ -99,14 +99,17 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
     """``positive_orthant_sequential`` on rows: mean (M, k), cov (M, k, k) -> (M,).
 
     The least likely condition is the one with the smallest standardized mean h (log_ndtr is
-    increasing), so only the chosen condition's probability is evaluated per step.
+    increasing), so only the chosen condition's probability is evaluated per step. Each
+    truncation is a rank-one downdate of the covariance, kept as (gain, shrink) pairs: a step
+    needs only the diagonal and the chosen column, never the whole updated matrix.
     """
-    mu, sig = mu.copy(), sig.copy()
+    mu = mu.copy()
     count, k = mu.shape
     rows = np.arange(count)
+    var = np.diagonal(sig, axis1=1, axis2=2).copy()
+    downdates = []  # (gain (M, k), shrink (M,)) per step: S -= shrink * gain gain^T
     total = np.ones(count)
     for step in range(k):
-        var = np.diagonal(sig, axis1=1, axis2=2)
         h = _standardize(mu, var)
         # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
         # whichever is picked changes nothing (factor 1, zero shift and shrink).
@@ -123,13 +126,14 @@ def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
         sd_j = np.sqrt(np.maximum(var_j, 0.0))
         shift = sd_j * mills  # truncated mean minus mean
         shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
-        col = sig[rows, :, j]  # (M, k): S_.j
+        col = sig[rows, :, j]  # (M, k): S_.j, then the earlier downdates
+        for gain_t, shrink_t in downdates:
+            col = col - gain_t * gain_t[rows, j][:, None] * shrink_t[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
         mu += gain * shift[:, None]
-        update = gain[:, :, None] * gain[:, None, :]
-        update *= shrink[:, None, None]
-        sig -= update
+        var -= gain * gain * shrink[:, None]
+        downdates.append((gain, shrink))
         mu[rows, j] = np.inf  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
