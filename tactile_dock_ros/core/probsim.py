@@ -201,7 +201,8 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     values, grads, still = _collision_conditions(a, b, means)
-    cov_g = np.einsum("iked,edf,jkef->ijke", grads, covs, grads)  # (4, 4, K, E)
+    g = np.moveaxis(grads, 0, 2)  # (K, E, 4 conditions, 4)
+    cov_g = np.moveaxis(g @ covs @ np.swapaxes(g, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
     var = np.stack([cov_g[i, i] for i in range(4)])
     if method == "univariate":  # eq. (26)
         p = np.prod(ndtr(_standardize(values, var)), axis=0)
