@@ -152,3 +152,19 @@ def test_closed_shape_matches_monte_carlo():
         path = [[x, 1.0], [x, -1.0]]
         mc = simulate.monte_carlo_dock_probability(samples, True, path, 0.4, DOWN)
         assert probsim.dock_probability(shape, path, DOWN).p_dock == pytest.approx(mc, abs=0.05)
+
+
+@pytest.mark.parametrize("name", ["notch", "three_ledges"])
+def test_pruning_loses_only_negligible_events(name, monkeypatch):
+    """The sequential fast path (bounds before the orthant) against evaluating every event."""
+    prob = problems.get(name)
+    shape = prob.prior
+    mv = shape.mean_vertices
+    mid = 0.5 * (mv[shape.edges[:, 0]] + mv[shape.edges[:, 1]])
+    starts, ends = mid - 0.3 * prob.load, mid + 0.3 * prob.load
+    pruned = probsim.dock_probabilities(shape, starts, ends, prob.load)
+    monkeypatch.setattr(probsim, "PRUNE_BELOW", -1.0)  # keeps every (move, edge, event)
+    full = probsim.dock_probabilities(shape, starts, ends, prob.load)
+    for fast, slow in zip(pruned, full, strict=True):
+        assert np.max(np.abs(fast - slow)) <= 1e-9
+    assert np.max(full[0]) > 0.5  # the comparison covers likely docks, not only zeros

@@ -44,6 +44,7 @@ from .simulate import cross, edge_index_arrays, friction_functionals, unit
 
 METHODS = ("bivariate", "univariate", "sequential")
 L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
+_HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 
 
 @dataclass(frozen=True)
@@ -87,33 +88,53 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
     deterministically related, e.g. when a single rotation drives all four conditions of (7-10).
     Zero-variance conditions count as certain (mean >= 0) or impossible; k steps, k = 4 here.
     """
-    mu = np.array(mean, dtype=float)
-    sig = np.array(cov, dtype=float)
-    k = len(mu)
-    done = np.zeros(mu.shape, dtype=bool)
-    total = np.ones(mu.shape[1:])
-    for _ in range(k):
-        h = _standardize(mu, np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)))
-        log_p = np.where(done, np.inf, log_ndtr(h))
-        j = np.argmin(log_p, axis=0)[None]  # least likely condition first
-        hj = np.take_along_axis(h, j, 0)[0]
-        total = total * np.exp(np.take_along_axis(log_p, j, 0)[0])
-        var_j = np.take_along_axis(
-            np.diagonal(sig, axis1=0, axis2=1).transpose(-1, *range(mu.ndim - 1)), j, 0
-        )[0]
+    mean = np.asarray(mean, dtype=float)
+    k, batch = len(mean), mean.shape[1:]
+    flat_mean = np.moveaxis(mean.reshape(k, -1), 0, -1)  # (M, k)
+    flat_cov = np.moveaxis(np.asarray(cov, dtype=float).reshape(k, k, -1), -1, 0)  # (M, k, k)
+    return _orthant_rows(flat_mean, flat_cov).reshape(batch)
+
+
+def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
+    """``positive_orthant_sequential`` on rows: mean (M, k), cov (M, k, k) -> (M,).
+
+    The least likely condition is the one with the smallest standardized mean h (log_ndtr is
+    increasing), so only the chosen condition's probability is evaluated per step. Each
+    truncation is a rank-one downdate of the covariance, kept as (gain, shrink) pairs: a step
+    needs only the diagonal and the chosen column, never the whole updated matrix.
+    """
+    mu = mu.copy()
+    count, k = mu.shape
+    rows = np.arange(count)
+    var = np.diagonal(sig, axis1=1, axis2=2).copy()
+    downdates = []  # (gain (M, k), shrink (M,)) per step: S -= shrink * gain gain^T
+    total = np.ones(count)
+    for step in range(k):
+        h = _standardize(mu, var)
+        # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
+        # whichever is picked changes nothing (factor 1, zero shift and shrink).
+        j = np.argmin(h, axis=1)
+        hj, var_j = h[rows, j], var[rows, j]
         finite = np.isfinite(hj)
         hj_fin = np.where(finite, hj, 0.0)
-        mills = np.exp(-0.5 * hj_fin**2 - 0.5 * np.log(2 * np.pi) - log_ndtr(hj_fin))
+        log_pj = log_ndtr(hj_fin)
+        total = total * np.exp(np.where(finite, log_pj, np.where(hj > 0, 0.0, -np.inf)))
+        if step == k - 1:  # nothing left to condition
+            break
+        mills = np.exp(-0.5 * hj_fin**2 - _HALF_LOG_2PI - log_pj)
         mills = np.where(finite, mills, 0.0)
         sd_j = np.sqrt(np.maximum(var_j, 0.0))
         shift = sd_j * mills  # truncated mean minus mean
         shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
-        col = np.take_along_axis(sig, np.broadcast_to(j[None], (k, *j.shape)), 1)[:, 0]  # S_.j
+        col = sig[rows, :, j]  # (M, k): S_.j, then the earlier downdates
+        for gain_t, shrink_t in downdates:
+            col = col - gain_t * gain_t[rows, j][:, None] * shrink_t[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            gain = np.where(var_j > 0, col / var_j, 0.0)
-        mu = mu + gain * shift
-        sig = sig - gain[:, None] * gain[None, :] * shrink
-        np.put_along_axis(done, j, True, 0)
+            gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
+        mu += gain * shift[:, None]
+        var -= gain * gain * shrink[:, None]
+        downdates.append((gain, shrink))
+        mu[rows, j] = np.inf  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
 
@@ -122,18 +143,22 @@ def _check_shape(shape: GaussianShape) -> None:
         raise TypeError(f"shape must be a GaussianShape, got {type(shape).__name__}")
 
 
-def _collision_conditions(a, b, means):
-    """Conditions (7-10) for moves a, b (K, 2) against edge means (E, 4), as functions of
-    y = (c, d) that must be >= 0: values at the mean (4, K, E) and gradients (4, K, E, 4).
+def _move_endpoints(a, b) -> tuple[np.ndarray, np.ndarray]:
+    """Moves as finite (K, 2) arrays; ValueError otherwise."""
+    a = np.asarray(a, dtype=float).reshape(-1, 2)
+    b = np.asarray(b, dtype=float).reshape(-1, 2)
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise ValueError("move endpoints must be finite")
+    return a, b
+
+
+def _conditions(a, b, c, d):
+    """Conditions (7-10) for move a -> b and edge y = (c, d), all broadcastable (..., 2), as
+    functions of y that must be >= 0: values at the mean (4, ...) and gradients (4, ..., 4).
 
     (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
     about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
     """
-    a = np.asarray(a, dtype=float).reshape(-1, 1, 2)
-    b = np.asarray(b, dtype=float).reshape(-1, 1, 2)
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-        raise ValueError("move endpoints must be finite")
-    c, d = means[None, :, :2], means[None, :, 2:]
     move = b - a
     zero = np.zeros(np.broadcast_shapes(c.shape, a.shape)[:-1])
     values = np.stack(
@@ -155,7 +180,15 @@ def _collision_conditions(a, b, means):
             np.stack([zero, zero, my, -mx], axis=-1),
         ]
     )
-    still = np.linalg.norm(move, axis=-1) == 0.0  # (K, 1)
+    return values, grads
+
+
+def _collision_conditions(a, b, means):
+    """``_conditions`` for every pair of moves a, b (K, 2) and edge means (E, 4): values
+    (4, K, E), gradients (4, K, E, 4) and the zero-length moves (K, 1)."""
+    a, b = _move_endpoints(a, b)
+    values, grads = _conditions(a[:, None], b[:, None], means[None, :, :2], means[None, :, 2:])
+    still = np.linalg.norm(b - a, axis=-1)[:, None] == 0.0
     return values, grads, still
 
 
@@ -168,7 +201,8 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     values, grads, still = _collision_conditions(a, b, means)
-    cov_g = np.einsum("iked,edf,jkef->ijke", grads, covs, grads)  # (4, 4, K, E)
+    g = np.moveaxis(grads, 0, 2)  # (K, E, 4 conditions, 4)
+    cov_g = np.moveaxis(g @ covs @ np.swapaxes(g, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
     var = np.stack([cov_g[i, i] for i in range(4)])
     if method == "univariate":  # eq. (26)
         p = np.prod(ndtr(_standardize(values, var)), axis=0)
@@ -181,35 +215,65 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     return np.where(still, 0.0, p)
 
 
+# Friction conditions of the loading-move events in "must be >= 0" form (Sec. V-A1), as signed
+# rows of simulate.friction_functionals: -wL, -wR (stick), wL, wN (slide left), wR (slide right).
+_FRICTION_ROWS = np.array([L_, R_, L_, N_, R_])
+_FRICTION_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0, 1.0])
+# Per event (stick, slide left, slide right): its 6 conditions among the 9 = (7-10) + the above.
+_EVENT_PICK = np.array([[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 6, 7], [0, 1, 2, 3, 8, 7]])
+# Contacts whose bound (the least likely of their single conditions) is below this are skipped.
+PRUNE_BELOW = 1e-12
+
+
 def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
     stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
-    conditioning, so the dependence between where the edge lies and how it is tilted is kept."""
+    conditioning, so the dependence between where the edge lies and how it is tilted is kept.
+
+    Pruning (Sec. IV-F): an event is no likelier than its least likely single condition; events
+    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 7 x 7
+    covariance of the four collision and three friction conditions is formed once per surviving
+    (move, edge) pair, and all surviving events go through one batched orthant evaluation.
+    """
     means, covs = shape.edge_gaussians()
-    values, grads, still = _collision_conditions(a, b, means)
-    w = friction_functionals(load, shape.friction)
-    rows = {  # the two extra "must be >= 0" functionals of t per event
-        "stick": (-w[L_], -w[R_]),
-        "left": (w[L_], w[N_]),
-        "right": (w[R_], w[N_]),
-    }
-    mean_t = means[:, 2:] - means[:, :2]
-    shape_ke = values.shape[1:]
-    edge_of = np.broadcast_to(np.arange(len(means)), shape_ke)
-    # Prune (Sec. IV-F): a contact no likelier than its least likely condition, here < 1e-12.
-    var = np.einsum("iked,edf,ikef->ike", grads, covs, grads)
-    live = (np.min(ndtr(_standardize(values, var)), axis=0) > 1e-12) & ~still
-    e_live = edge_of[live]
-    v_live, g_live = values[:, live], grads[:, live]  # (4, M), (4, M, 4)
-    out = np.zeros((3, *shape_ke))
-    for slot, pair in enumerate(rows.values()):
-        extra_v = np.stack([mean_t[e_live] @ f for f in pair])
-        extra_g = np.stack(
-            [np.broadcast_to(np.concatenate([-f, f]), g_live.shape[1:]) for f in pair]
-        )
-        g = np.concatenate([g_live, extra_g])
-        cov_g = np.einsum("imd,mdf,jmf->ijm", g, covs[e_live], g)
-        out[slot][live] = positive_orthant_sequential(np.concatenate([v_live, extra_v]), cov_g)
+    a, b = _move_endpoints(a, b)
+    w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
+    fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
+    fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 5)
+    fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
+    p_fric = ndtr(_standardize(fric_mean, fric_var))
+    event_bound = np.min(p_fric[:, _EVENT_PICK[:, 4:] - 4], axis=2).T  # (3, E)
+    # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
+    # +-perp(b - a), so their variances need only the 2 x 2 endpoint blocks.
+    move = b - a
+    perp = np.stack([-move[:, 1], move[:, 0]], axis=1)  # (K, 2)
+    lin_values = np.stack(
+        [
+            cross(move[:, None], means[None, :, :2] - a[:, None]),
+            cross(move[:, None], a[:, None] - means[None, :, 2:]),
+        ]
+    )
+    lin_var = np.stack(
+        [np.einsum("kd,edf,kf->ke", perp, covs[:, i : i + 2, i : i + 2], perp) for i in (0, 2)]
+    )
+    still = (np.linalg.norm(move, axis=1) == 0.0)[:, None]
+    keep = (np.min(ndtr(_standardize(lin_values, lin_var)), axis=0) > PRUNE_BELOW) & ~still
+    keep &= event_bound.max(axis=0)[None] > PRUNE_BELOW
+    k_idx, e_idx = np.nonzero(keep)
+    # Second pass on the survivors: the 9 x 9 covariance of all conditions, once per pair.
+    values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
+    count = len(k_idx)
+    g9 = np.concatenate([np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (count, 5, 4))], 1)
+    v9 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 9)
+    c9 = g9 @ covs[e_idx] @ np.swapaxes(g9, 1, 2)  # (M, 9, 9)
+    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4]
+    bound = np.min(ndtr(_standardize(values.T, var)), axis=1)  # (M,)
+    slot, pos = np.nonzero(np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW)
+    pick = _EVENT_PICK[slot]  # (S, 6) rows of each live event
+    v6 = np.take(v9, (pos * 9)[:, None] + pick)
+    c6 = np.take(c9, (pos * 81)[:, None, None] + pick[:, :, None] * 9 + pick[:, None, :])
+    out = np.zeros((3, len(a), len(means)))
+    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
     return out
 
 
@@ -242,33 +306,34 @@ def _vertex_transitions(shape: GaussianShape, terms: dict):
     el, er = left[inner], right[inner]
     mean, cov, fb = terms["mean"], terms["cov"], terms["basis"]
     cross_cov = fb[el] @ np.swapaxes(fb[er], 1, 2)  # (V, 3, 3): functional i of l, j of r
-
-    def pair(e1, i, e2, j, c12):
-        return _both_positive(mean[e1, i], cov[e1, i, i], mean[e2, j], cov[e2, j, j], c12)
-
-    def one(e, i):
-        return ndtr(_standardize(mean[e, i], cov[e, i, i]))
+    # Both slide directions at once: a left slide (row L_) arrives along r(v) = src and goes on
+    # to l(v) = dst; a right slide (row R_) the other way round. cov_ds (2V, 3, 3) is
+    # Cov(functional i of dst, functional j of src).
+    count = len(el)
+    src, dst = np.concatenate([er, el]), np.concatenate([el, er])
+    row = np.repeat([L_, R_], count)
+    face = np.full_like(row, N_)
+    cov_ds = np.concatenate([cross_cov, np.swapaxes(cross_cov, 1, 2)])
+    at = np.arange(2 * count)
+    # The three pair probabilities in one quadrant call: P(slide on dst, slide on src),
+    # P(slide on dst, dst faces the load), P(dst faces the load, slide on src).
+    e1, i1 = np.concatenate([dst, dst, dst]), np.concatenate([row, row, face])
+    e2, i2 = np.concatenate([src, dst, src]), np.concatenate([row, face, row])
+    c12 = np.concatenate([cov_ds[at, row, row], cov[dst, row, N_], cov_ds[at, N_, row]])
+    p_pair = _both_positive(mean[e1, i1], cov[e1, i1, i1], mean[e2, i2], cov[e2, i2, i2], c12)
+    both_slide, dst_slide_faces, faces_after = np.split(p_pair, 3)
+    e, i = np.concatenate([src, dst]), np.concatenate([row, row])
+    p_src, p_dst = np.split(ndtr(_standardize(mean[e, i], cov[e, i, i])), 2)
 
     def ratio(num, den):
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(den > 0, np.clip(num / den, 0.0, 1.0), 0.0)
 
-    def arrival(src, dst, row, cov_ds):
-        """Continue / stick on dst after sliding along src (row L_ or R_); cov_ds (V, 3, 3) is
-        Cov(functional i of dst, functional j of src)."""
-        p_src = one(src, row)
-        cont = ratio(pair(dst, row, src, row, cov_ds[:, row, row]), p_src) * ratio(
-            pair(dst, row, dst, N_, cov[dst, row, N_]), one(dst, row)
-        )
-        face = ratio(pair(dst, N_, src, row, cov_ds[:, N_, row]), p_src)
-        return cont, np.maximum(face - cont, 0.0)
-
+    cont = ratio(both_slide, p_src) * ratio(dst_slide_faces, p_dst)
+    stick = np.maximum(ratio(faces_after, p_src) - cont, 0.0)
     out = {k: np.zeros(n) for k in ("cont_left", "stick_left", "cont_right", "stick_right")}
-    # a left slide arrives along r(v) and goes on to l(v); a right slide the other way round
-    out["cont_left"][inner], out["stick_left"][inner] = arrival(er, el, L_, cross_cov)
-    out["cont_right"][inner], out["stick_right"][inner] = arrival(
-        el, er, R_, np.swapaxes(cross_cov, 1, 2)
-    )
+    out["cont_left"][inner], out["cont_right"][inner] = np.split(cont, 2)
+    out["stick_left"][inner], out["stick_right"][inner] = np.split(stick, 2)
     return out
 
 
