@@ -83,13 +83,15 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
+def _first_infeasible(system, coef, mids, n_real, live, base, chunk: int = 16):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
-    such segment. Only the ``live`` (C, P) pairs are evaluated: every other pair keeps the sign
-    of its value ``base`` (C, P) at the window start throughout the window (``live_pairs``),
-    so observations without live pairs stay satisfied and only the others are reduced.
-    Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every primitive: fewer numpy
-    calls. Chunked: the first exit is usually among the first few roots."""
+    such segment. Row c has ``n_real[c]`` segments; the rest are the zero-width padding at the
+    window end (judged by the last real one) and are never evaluated. Only the ``live`` (C, P)
+    pairs are evaluated: every other pair keeps the sign of its value ``base`` (C, P) at the
+    window start throughout the window (``live_pairs``), so observations without live pairs
+    stay satisfied and only the others are reduced. Small systems (<= WINDOW_MIN_PRIMITIVES
+    primitives) evaluate every primitive: fewer numpy calls. Chunked: the first exit is usually
+    among the first few roots, and a row leaves once its real segments are judged."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
     first = np.zeros(c, dtype=int)
@@ -112,15 +114,16 @@ def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
 
         def violated(rows, span):
             values = np.repeat(base[rows, None], len(range(n_seg)[span]), axis=1)  # (r, s, P')
-            sel = np.flatnonzero(~hit[ci])
-            at_row = np.cumsum(~hit)[ci[sel]] - 1  # position of the live pair's chain in rows
+            sel = np.flatnonzero(todo[ci])
+            at_row = np.cumsum(todo)[ci[sel]] - 1  # position of the live pair's chain in rows
             g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])
             g = np.where(inactive[sel], -np.inf, g)
             values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
             return np.any(system.reduce_columns(values, columns) > 0, axis=-1)
 
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
-        rows = np.flatnonzero(~hit)
+        todo = ~hit & (n_real > lo)
+        rows = np.flatnonzero(todo)
         if rows.size == 0:
             break
         bad = violated(rows, slice(lo, lo + chunk))
@@ -183,7 +186,8 @@ def hmc_chains(
         solve &= live[:, system.prim_pair]
         roots, owner = ellipse_roots(coef, solve, system.linear, span)
         edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
-        hit, first = _first_infeasible(system, coef, mids, live, system.pair_values_of(g0))
+        n_real = np.sum(np.isfinite(roots), axis=1) + 1
+        hit, first = _first_infeasible(system, coef, mids, n_real, live, system.pair_values_of(g0))
         stuck = hit & (first == 0)
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
