@@ -33,6 +33,8 @@ METHODS = ("hmc", "gibbs", "mh", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 SEED_DESCENTS = 4
 WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
+WINDOW_MIN = 0.01  # rad: smallest adaptive HMC look-ahead window
+WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then clipped)
 
 
 @dataclass(frozen=True)
@@ -151,9 +153,12 @@ def hmc_chains(
       one in the same iteration, so no chain waits for the one with the most bounces;
     - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
-      a window
-      without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
-      which far fewer primitives can vanish per solve);
+      a window without an exit just advances the state: an exact reorganisation of Alg. 1's
+      loop in which far fewer primitives can vanish per solve);
+    - each chain adapts its window to its bounce rate: after a bounce at dt into the window
+      the next one is WINDOW_GROWTH dt (at least WINDOW_MIN), after a window without an exit
+      twice as long (at most ``window``). Any window sequence gives the same trajectory; short
+      windows after frequent bounces (thin slabs) let the Bernstein filter cull most roots;
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
       infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
     - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
@@ -172,13 +177,15 @@ def hmc_chains(
     stats = {"bounces": 0, "rejected": 0}
     if window is None:
         window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
-    per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
+    win = np.full(c, float(window))
+    doublings = int(np.ceil(np.log2(max(window / WINDOW_MIN, 1.0)))) + 1
+    per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(duration / window)) + 1
     for _ in range(per_move * n_steps):  # every iteration advances each active chain
         idx = np.flatnonzero(done < n_steps)
         if idx.size == 0:
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
-        span = np.minimum(lc, window)
+        span = np.minimum(lc, win[idx])
         coef = system.ellipse_coefficients(zc, pc)
         solve = window_can_vanish(coef, span)
         g0 = coef[..., 0] + coef[..., 1] + coef[..., 3]
@@ -203,6 +210,8 @@ def hmc_chains(
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
             stats["bounces"] += int(bounce.sum())
         bounced[idx] += bounce
+        grown = np.where(hit, win[idx], 2 * win[idx])
+        win[idx] = np.clip(np.where(bounce, WINDOW_GROWTH * dt, grown), WINDOW_MIN, window)
         failed = stuck | (bounced[idx] > max_bounces)
         finished = failed | (~hit & (dt >= lc))
         z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
