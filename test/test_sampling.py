@@ -192,15 +192,16 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
 
 def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
     """Look-ahead windows (fixed or adapted to the bounce rate) only reorganise Alg. 1: one
-    move from the same states and momenta ends at the same state after the same bounces."""
+    move from the same states and momenta ends at the same state after the same bounces, and
+    so do the following moves (momenta are drawn per move and chain, not per schedule)."""
     problem, history = sloper_case
     z = sample_posterior(problem.prior, history, 32, np.random.default_rng(2)).z
     system = HistoryConstraints(problem.prior, history, prune_pairs(problem.prior, history, 1e-4))
     ends = {}
     for window, adaptive in ((np.pi / 2, False), (0.03, False), (np.pi / 2, True)):
         monkeypatch.setattr(sampling, "WINDOW_MIN", 0.01 if adaptive else 10.0)
-        draws, stats = sampling.hmc_chains(system, z, 1, np.random.default_rng(9), window=window)
-        ends[window, adaptive] = draws[:, 0], stats["bounces"]
+        draws, stats = sampling.hmc_chains(system, z, 3, np.random.default_rng(9), window=window)
+        ends[window, adaptive] = draws, stats["bounces"]
     whole, bounces = ends[np.pi / 2, False]
     assert bounces > len(z)  # the moves do bounce
     for end, count in ends.values():

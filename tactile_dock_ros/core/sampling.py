@@ -161,7 +161,9 @@ def hmc_chains(
       windows after frequent bounces (thin slabs) let the Bernstein filter cull most roots;
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
       infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
-    - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
+    - roots closer than 1e-9 to the current time are ignored (the one just bounced on);
+    - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
+      loop schedules windows and bounces.
     Returns the draws and counters (bounces, rejected moves).
     """
     if not 0 < duration < np.pi:
@@ -171,7 +173,8 @@ def hmc_chains(
     out = np.empty((c, n_steps, m))
     done = np.zeros(c, dtype=int)
     start = z.copy()
-    p = rng.standard_normal(z.shape)
+    momenta = rng.standard_normal((max(n_steps, 1), c, m))  # move k of chain c: [k, c]
+    p = momenta[0].copy()
     left = np.full(c, float(duration))
     bounced = np.zeros(c, dtype=int)
     stats = {"bounces": 0, "rejected": 0}
@@ -223,7 +226,7 @@ def hmc_chains(
             out[fin, done[fin]] = z[fin]
             done[fin] += 1
             start[fin] = z[fin]
-            p[fin] = rng.standard_normal((fin.size, m))
+            p[fin] = momenta[np.minimum(done[fin], n_steps - 1), fin]
             left[fin] = duration
             bounced[fin] = 0
     unfinished = np.flatnonzero(done < n_steps)
