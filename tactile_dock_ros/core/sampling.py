@@ -155,10 +155,12 @@ def hmc_chains(
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
       a window without an exit just advances the state: an exact reorganisation of Alg. 1's
       loop in which far fewer primitives can vanish per solve);
-    - each chain adapts its window to its bounce rate: after a bounce at dt into the window
-      the next one is WINDOW_GROWTH dt (at least WINDOW_MIN), after a window without an exit
-      twice as long (at most ``window``). Any window sequence gives the same trajectory; short
-      windows after frequent bounces (thin slabs) let the Bernstein filter cull most roots;
+    - on systems with quadratic primitives each chain adapts its window to its bounce rate:
+      after a bounce at dt into the window the next one is WINDOW_GROWTH dt (at least
+      WINDOW_MIN), after a window without an exit twice as long (at most ``window``). Any
+      window sequence gives the same trajectory; short windows after frequent bounces (thin
+      slabs) let the Bernstein filter cull most quartic solves (all-linear systems have
+      none to cull: there the extra iterations only cost);
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
       infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
     - roots closer than 1e-9 to the current time are ignored (the one just bounced on);
@@ -181,7 +183,9 @@ def hmc_chains(
     if window is None:
         window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
     win = np.full(c, float(window))
-    doublings = int(np.ceil(np.log2(max(window / WINDOW_MIN, 1.0)))) + 1
+    # only quartic solves are worth culling; all-linear systems keep the fixed window
+    w_min = window if np.all(system.linear) else min(WINDOW_MIN, window)
+    doublings = int(np.ceil(np.log2(window / w_min))) + 1
     per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(duration / window)) + 1
     for _ in range(per_move * n_steps):  # every iteration advances each active chain
         idx = np.flatnonzero(done < n_steps)
@@ -214,7 +218,7 @@ def hmc_chains(
             stats["bounces"] += int(bounce.sum())
         bounced[idx] += bounce
         grown = np.where(hit, win[idx], 2 * win[idx])
-        win[idx] = np.clip(np.where(bounce, WINDOW_GROWTH * dt, grown), WINDOW_MIN, window)
+        win[idx] = np.clip(np.where(bounce, WINDOW_GROWTH * dt, grown), w_min, window)
         failed = stuck | (bounced[idx] > max_bounces)
         finished = failed | (~hit & (dt >= lc))
         z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
