@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tactile_dock_ros.core import problems
-from tactile_dock_ros.core.constraint_systems import LinearConstraints
-from tactile_dock_ros.core.constraints import history_consistent
+from tactile_dock_ros.core import problems, sampling
+from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
+from tactile_dock_ros.core.constraints import history_consistent, prune_pairs
 from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.sampling import ChainRunner, sample_posterior
@@ -188,3 +188,22 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
     assert history_consistent(False, out.vertices, history, problem.friction).all()
     with pytest.raises(ValueError, match="init_z"):
         sample_posterior(shape, history, 5, np.random.default_rng(0), init_z=before.z * np.nan)
+
+
+def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
+    """Look-ahead windows (fixed or adapted to the bounce rate) only reorganise Alg. 1: one
+    move from the same states and momenta ends at the same state after the same bounces, and
+    so do the following moves (momenta are drawn per move and chain, not per schedule)."""
+    problem, history = sloper_case
+    z = sample_posterior(problem.prior, history, 32, np.random.default_rng(2)).z
+    system = HistoryConstraints(problem.prior, history, prune_pairs(problem.prior, history, 1e-4))
+    ends = {}
+    for window, adaptive in ((np.pi / 2, False), (0.03, False), (np.pi / 2, True)):
+        monkeypatch.setattr(sampling, "WINDOW_MIN", 0.01 if adaptive else 10.0)
+        draws, stats = sampling.hmc_chains(system, z, 3, np.random.default_rng(9), window=window)
+        ends[window, adaptive] = draws, stats["bounces"]
+    whole, bounces = ends[np.pi / 2, False]
+    assert bounces > len(z)  # the moves do bounce
+    for end, count in ends.values():
+        assert count == bounces
+        np.testing.assert_allclose(end, whole, atol=1e-8)

@@ -118,7 +118,9 @@ class HistoryConstraints:
     def observation_columns(self, pair: np.ndarray) -> np.ndarray:
         """Sorted indices of all pairs of the observations that own ``pair``."""
         obs = self.structure.pairs[:, 0]
-        return np.flatnonzero(np.isin(obs, obs[pair]))
+        owners = np.zeros(self.n_obs, dtype=bool)
+        owners[obs[pair]] = True
+        return np.flatnonzero(owners[obs])
 
     def reduce_columns(self, pair: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """Values (..., k') of the observations owning ``columns`` (from

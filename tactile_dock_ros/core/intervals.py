@@ -135,15 +135,17 @@ def ellipse_roots(
     t_max = np.asarray(t_max, dtype=float)
     lo = np.full(len(t_max), t_min)
     ci, ki = np.nonzero(solve & linear[None])
-    k0, k1, k2 = (coef[ci, ki, j] for j in range(3))
+    k0, k1, k2 = coef[ci, ki, :3].T
     lin = quadratic_roots(k0 - k1, 2 * k2, k0 + k1)  # (n, 2)
     cq, kq = np.nonzero(solve & ~linear[None])
-    k0, k1, k2, k3, k4 = (coef[cq, kq, j] for j in range(5))
+    k0, k1, k2, k3, k4 = coef[cq, kq].T
     poly = np.stack(
         [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
     )
-    quart = quartic_roots(poly) if cq.size else np.zeros((0, 4))
-    u = np.concatenate([np.pad(lin, ((0, 0), (0, 2)), constant_values=np.nan), quart])
+    u = np.full((ci.size + cq.size, 4), np.nan)
+    u[: ci.size, :2] = lin
+    if cq.size:
+        u[ci.size :] = quartic_roots(poly)
     return _sorted_roots(
         np.concatenate([ci, cq]), 2 * np.arctan(u), np.concatenate([ki, kq]), lo, t_max
     )

@@ -33,6 +33,8 @@ METHODS = ("hmc", "gibbs", "mh", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 SEED_DESCENTS = 4
 WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
+WINDOW_MIN = 0.01  # rad: smallest adaptive HMC look-ahead window
+WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then clipped)
 
 
 @dataclass(frozen=True)
@@ -83,13 +85,15 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
+def _first_infeasible(system, coef, mids, n_real, live, base, chunk: int = 16):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
-    such segment. Only the ``live`` (C, P) pairs are evaluated: every other pair keeps the sign
-    of its value ``base`` (C, P) at the window start throughout the window (``live_pairs``),
-    so observations without live pairs stay satisfied and only the others are reduced.
-    Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every primitive: fewer numpy
-    calls. Chunked: the first exit is usually among the first few roots."""
+    such segment. Row c has ``n_real[c]`` segments; the rest are the zero-width padding at the
+    window end (judged by the last real one) and are never evaluated. Only the ``live`` (C, P)
+    pairs are evaluated: every other pair keeps the sign of its value ``base`` (C, P) at the
+    window start throughout the window (``live_pairs``), so observations without live pairs
+    stay satisfied and only the others are reduced. Small systems (<= WINDOW_MIN_PRIMITIVES
+    primitives) evaluate every primitive: fewer numpy calls. Chunked: the first exit is usually
+    among the first few roots, and a row leaves once its real segments are judged."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
     first = np.zeros(c, dtype=int)
@@ -112,15 +116,16 @@ def _first_infeasible(system, coef, mids, live, base, chunk: int = 16):
 
         def violated(rows, span):
             values = np.repeat(base[rows, None], len(range(n_seg)[span]), axis=1)  # (r, s, P')
-            sel = np.flatnonzero(~hit[ci])
-            at_row = np.cumsum(~hit)[ci[sel]] - 1  # position of the live pair's chain in rows
+            sel = np.flatnonzero(todo[ci])
+            at_row = np.cumsum(todo)[ci[sel]] - 1  # position of the live pair's chain in rows
             g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])
             g = np.where(inactive[sel], -np.inf, g)
             values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
             return np.any(system.reduce_columns(values, columns) > 0, axis=-1)
 
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
-        rows = np.flatnonzero(~hit)
+        todo = ~hit & (n_real > lo)
+        rows = np.flatnonzero(todo)
         if rows.size == 0:
             break
         bad = violated(rows, slice(lo, lo + chunk))
@@ -148,12 +153,19 @@ def hmc_chains(
       one in the same iteration, so no chain waits for the one with the most bounces;
     - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
-      a window
-      without an exit just advances the state: an exact reorganisation of Alg. 1's loop in
-      which far fewer primitives can vanish per solve);
+      a window without an exit just advances the state: an exact reorganisation of Alg. 1's
+      loop in which far fewer primitives can vanish per solve);
+    - on systems with quadratic primitives each chain adapts its window to its bounce rate:
+      after a bounce at dt into the window the next one is WINDOW_GROWTH dt (at least
+      WINDOW_MIN), after a window without an exit twice as long (at most ``window``). Any
+      window sequence gives the same trajectory; short windows after frequent bounces (thin
+      slabs) let the Bernstein filter cull most quartic solves (all-linear systems have
+      none to cull: there the extra iterations only cost);
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
       infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
-    - roots closer than 1e-9 to the current time are ignored (the one just bounced on).
+    - roots closer than 1e-9 to the current time are ignored (the one just bounced on);
+    - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
+      loop schedules windows and bounces.
     Returns the draws and counters (bounces, rejected moves).
     """
     if not 0 < duration < np.pi:
@@ -163,19 +175,24 @@ def hmc_chains(
     out = np.empty((c, n_steps, m))
     done = np.zeros(c, dtype=int)
     start = z.copy()
-    p = rng.standard_normal(z.shape)
+    momenta = rng.standard_normal((max(n_steps, 1), c, m))  # move k of chain c: [k, c]
+    p = momenta[0].copy()
     left = np.full(c, float(duration))
     bounced = np.zeros(c, dtype=int)
     stats = {"bounces": 0, "rejected": 0}
     if window is None:
         window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
-    per_move = 2 * max_bounces + int(np.ceil(duration / window)) + 1
+    win = np.full(c, float(window))
+    # only quartic solves are worth culling; all-linear systems keep the fixed window
+    w_min = window if np.all(system.linear) else min(WINDOW_MIN, window)
+    doublings = int(np.ceil(np.log2(window / w_min))) + 1
+    per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(duration / window)) + 1
     for _ in range(per_move * n_steps):  # every iteration advances each active chain
         idx = np.flatnonzero(done < n_steps)
         if idx.size == 0:
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
-        span = np.minimum(lc, window)
+        span = np.minimum(lc, win[idx])
         coef = system.ellipse_coefficients(zc, pc)
         solve = window_can_vanish(coef, span)
         g0 = coef[..., 0] + coef[..., 1] + coef[..., 3]
@@ -183,7 +200,8 @@ def hmc_chains(
         solve &= live[:, system.prim_pair]
         roots, owner = ellipse_roots(coef, solve, system.linear, span)
         edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
-        hit, first = _first_infeasible(system, coef, mids, live, system.pair_values_of(g0))
+        n_real = np.sum(np.isfinite(roots), axis=1) + 1
+        hit, first = _first_infeasible(system, coef, mids, n_real, live, system.pair_values_of(g0))
         stuck = hit & (first == 0)
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
@@ -199,6 +217,8 @@ def hmc_chains(
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
             stats["bounces"] += int(bounce.sum())
         bounced[idx] += bounce
+        grown = np.where(hit, win[idx], 2 * win[idx])
+        win[idx] = np.clip(np.where(bounce, WINDOW_GROWTH * dt, grown), w_min, window)
         failed = stuck | (bounced[idx] > max_bounces)
         finished = failed | (~hit & (dt >= lc))
         z[idx], p[idx], left[idx] = z_new, p_new, lc - dt
@@ -210,7 +230,7 @@ def hmc_chains(
             out[fin, done[fin]] = z[fin]
             done[fin] += 1
             start[fin] = z[fin]
-            p[fin] = rng.standard_normal((fin.size, m))
+            p[fin] = momenta[np.minimum(done[fin], n_steps - 1), fin]
             left[fin] = duration
             bounced[fin] = 0
     unfinished = np.flatnonzero(done < n_steps)
