@@ -13,7 +13,7 @@ PYTEST_ARGS ?=
 # Run-time environment: ament_index finds our share/ directory in the venv prefix.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 
-.PHONY: test setup lint format bench-help clean distclean demo
+.PHONY: test setup lint format clean distclean demo
 .DEFAULT_GOAL := test
 
 setup: $(STAMPS)/msgs
