@@ -59,3 +59,18 @@ def test_unknown_arguments_and_profiles_are_errors():
         launch_xml.parse(LAUNCH_FILE, SHARE, {"profil": "mock"})
     with pytest.raises(FileNotFoundError):
         launch_xml.parse(LAUNCH_FILE, SHARE, {"profile": "simulation"})
+
+
+def test_set_env_reaches_every_node_including_included_ones(tmp_path):
+    nodes = launch_nodes("mock")
+    assert {n.environment.get("OPENBLAS_NUM_THREADS") for n in nodes.values()} == {"1"}
+    assert launch_nodes("mock", blas_threads="2")["mock_hardware"].environment == {
+        "OPENBLAS_NUM_THREADS": "2"
+    }
+    late = tmp_path / "late.launch.xml"
+    late.write_text(
+        '<launch><node pkg="p" exec="a" name="a"/><set_env name="X" value="1"/>'
+        '<node pkg="p" exec="b" name="b"/></launch>'
+    )
+    first, second = launch_xml.parse(late, SHARE)
+    assert first.environment == {} and second.environment == {"X": "1"}

@@ -46,7 +46,7 @@ def running(
                 node.command(PACKAGE_ROOT / "scripts", log_dir, sys.executable),
                 stdout=log,
                 stderr=subprocess.STDOUT,
-                env=environment,
+                env={**environment, **node.environment},
             )
             log.close()
         yield processes

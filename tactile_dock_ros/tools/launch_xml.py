@@ -4,9 +4,10 @@
 installable (PyPI has none) the system test and ``make demo`` start the very processes the
 launch file declares, from this parser, so the two cannot drift. Supported subset (what our
 launch files use): ``<arg name default>``, ``<node pkg exec name namespace>`` with ``<param
-from>``, ``<param name value>`` and ``<remap from to>`` children, ``<include file>`` with ``<arg
-name value>`` children, and the substitutions ``$(var NAME)`` and ``$(find-pkg-share PKG)``.
-Anything else raises ``ValueError`` rather than being silently ignored.
+from>``, ``<param name value>`` and ``<remap from to>`` children, ``<set_env name value>``
+(applies to the nodes after it, included files too, as in ``ros2 launch``), ``<include file>``
+with ``<arg name value>`` children, and the substitutions ``$(var NAME)`` and
+``$(find-pkg-share PKG)``. Anything else raises ``ValueError`` rather than being silently ignored.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class NodeLaunch:
     namespace: str = ""
     parameters: list = field(default_factory=list)  # Path (params file) or (name, value str)
     remappings: list[tuple[str, str]] = field(default_factory=list)
+    environment: dict[str, str] = field(default_factory=dict)  # from <set_env> before the node
 
     @property
     def full_name(self) -> str:
@@ -99,12 +101,15 @@ def _substitute(text: str, args: dict[str, str], share_dirs: dict[str, Path]) ->
 
 
 def parse(
-    path: Path, share_dirs: dict[str, Path], arguments: dict[str, str] | None = None
+    path: Path,
+    share_dirs: dict[str, Path],
+    arguments: dict[str, str] | None = None,
+    environment: dict[str, str] | None = None,
 ) -> list[NodeLaunch]:
     """Nodes of the launch file at ``path`` with launch ``arguments`` (``name:=value`` pairs).
 
     ``share_dirs`` maps package names to their share directory (the source tree works: it holds
-    ``launch/`` and ``config/``).
+    ``launch/`` and ``config/``); ``environment`` holds variables set by an including file.
     """
     root = ET.parse(path).getroot()
     if root.tag != "launch":
@@ -112,6 +117,7 @@ def parse(
     given = dict(arguments or {})
     args: dict[str, str] = {}
     nodes: list[NodeLaunch] = []
+    env = dict(environment or {})
 
     def sub(text: str) -> str:
         return _substitute(text, args, share_dirs)
@@ -125,11 +131,13 @@ def parse(
                 args[name] = sub(element.attrib["default"])
             else:
                 raise ValueError(f"{path}: launch argument {name!r} has no value")
+        elif element.tag == "set_env":
+            env[element.attrib["name"]] = sub(element.attrib["value"])
         elif element.tag == "node":
-            nodes.append(_node(element, sub))
+            nodes.append(_node(element, sub, env))
         elif element.tag == "include":
             child_args = {a.attrib["name"]: sub(a.attrib["value"]) for a in element.iter("arg")}
-            nodes += parse(Path(sub(element.attrib["file"])), share_dirs, child_args)
+            nodes += parse(Path(sub(element.attrib["file"])), share_dirs, child_args, env)
         else:
             raise ValueError(f"{path}: unsupported launch element <{element.tag}>")
     if given:
@@ -137,12 +145,13 @@ def parse(
     return nodes
 
 
-def _node(element: ET.Element, sub) -> NodeLaunch:
+def _node(element: ET.Element, sub, environment: dict[str, str]) -> NodeLaunch:
     node = NodeLaunch(
         package=element.attrib["pkg"],
         executable=element.attrib["exec"],
         name=element.attrib["name"],
         namespace=element.attrib.get("namespace", ""),
+        environment=dict(environment),
     )
     for child in element:
         if child.tag == "param" and "from" in child.attrib:
