@@ -72,6 +72,7 @@ def build() -> dict:
             docking_probability=0.75,
             objective=0.5,
             target_edge=17,
+            target_point=Point(x=1.25, y=1.5, z=0.0),
             reason="best docking probability 0.0004 < threshold 0.001",
         ),
         "ExecutionReport": ExecutionReport(

@@ -40,6 +40,7 @@ def _plan(**changes):
         objective=0.3,
         target_edge=4,
         reason="best site",
+        target_point=np.array([0.1, 0.05]),
     )
     fields.update(changes)
     return convert.PlanCommand(**fields)
@@ -120,6 +121,7 @@ def test_plan_round_trip():
     np.testing.assert_array_equal(back.waypoints, plan.waypoints)
     assert (back.plan_id, back.dock, back.target_edge, back.reason) == (3, True, 4, "best site")
     assert back.force_threshold == 3.0 and back.max_speed == 0.1
+    np.testing.assert_array_equal(back.target_point, plan.target_point)
 
 
 @pytest.mark.parametrize(

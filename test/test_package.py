@@ -19,6 +19,7 @@ ROSDEP_KEYS = {
     "cv2": "python3-opencv",
     "open3d": "python3-open3d-pip",
     "tmg_hmc": "python3-tmg-hmc-pip",
+    "rosbags": "python3-rosbags-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
     "catkin_pkg": "python3-catkin-pkg",

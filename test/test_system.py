@@ -2,11 +2,12 @@
 
 The executables, parameters and remappings come from launch/tactile_dock.launch.xml
 (profile:=mock), so this runs what `ros2 launch` would. A seeded feasible terrain docks within
-the planner's cycle budget; an infeasible one ends GAVE_UP; the executor's commands stay within
-its speed limit and the tool within its workspace box throughout.
+the planner's cycle budget; an infeasible one ends GAVE_UP, and its recorded bag replays offline
+to the very plans the planner published; the executor's commands stay within its speed limit and
+the tool within its workspace box throughout.
 """
 
-import importlib.util
+import json
 
 import numpy as np
 import pytest
@@ -19,17 +20,9 @@ from rclpy.executors import SingleThreadedExecutor
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.nodes import convert, qos
-from tactile_dock_ros.tools import bringup, episode
+from tactile_dock_ros.tools import bag, bringup, episode, replay
 
 pytestmark = pytest.mark.dds
-needs_core = pytest.mark.skipif(
-    any(
-        importlib.util.find_spec(m) is None
-        for m in ("tactile_dock_ros.core.sampling", "tactile_dock_ros.core.planner")
-    ),
-    reason="needs tactile_dock_ros.core.sampling and core.planner (not merged yet)",
-)
-
 CONFIG = yaml.safe_load((REPO_ROOT / "config" / "mock.yaml").read_text())
 SHARED = CONFIG["/**"]["ros__parameters"]
 EXECUTOR = CONFIG["executor"]["ros__parameters"]
@@ -86,7 +79,6 @@ def test_seeds_are_what_the_test_claims():
     assert feasible(sloper, truth[FEASIBLE_SEED]) and not feasible(sloper, truth[INFEASIBLE_SEED])
 
 
-@needs_core
 def test_feasible_terrain_docks_within_the_cycle_budget(tmp_path):
     record, tool = _episode(tmp_path, FEASIBLE_SEED)
     assert record.state == "DOCKED", _logs(tmp_path)
@@ -95,9 +87,15 @@ def test_feasible_terrain_docks_within_the_cycle_budget(tmp_path):
     _assert_within_limits(record, tool)
 
 
-@needs_core
 def test_infeasible_terrain_ends_gave_up(tmp_path):
     record, tool = _episode(tmp_path, INFEASIBLE_SEED)
     assert record.state == "GAVE_UP", _logs(tmp_path)
     assert all(r.outcome != r.DOCKED for r in record.reports)
     _assert_within_limits(record, tool)
+    # The episode's bag replays offline to exactly the plans the planner node published.
+    bag.write(tmp_path / "bag", record.messages)
+    out = tmp_path / "replay.json"
+    config = REPO_ROOT / "config" / "mock.yaml"
+    assert replay.main([str(tmp_path / "bag"), "--config", str(config), "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())
+    assert len(rows) == len(record.plans) and all(r["same"] for r in rows), rows

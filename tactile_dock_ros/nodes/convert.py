@@ -11,7 +11,7 @@ not available everywhere this runs, so the transform is a node parameter, see de
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from geometry_msgs.msg import Point, Vector3
@@ -235,6 +235,7 @@ class PlanCommand:
     objective: float
     target_edge: int
     reason: str
+    target_point: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # (2,) metres
 
 
 def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
@@ -250,6 +251,7 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
         docking_probability=float(command.p_dock),
         objective=float(command.objective),
         target_edge=int(command.target_edge),
+        target_point=_point(command.target_point),
         reason=command.reason,
     )
 
@@ -286,6 +288,7 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
         objective=float(msg.objective),
         target_edge=int(msg.target_edge),
         reason=msg.reason,
+        target_point=np.array([msg.target_point.x, msg.target_point.y], float),
     )
 
 

@@ -196,7 +196,8 @@ class PlannerNode(Node):
         command = convert.PlanCommand(
             plan_id=len(self.cycles) + 1,
             dock=dock,
-            waypoints=np.asarray(result.path, float).reshape(-1, 2),
+            # A give-up carries the tool position alone, so a recorded plan is self-contained.
+            waypoints=np.asarray(result.path if dock else self.tool, float).reshape(-1, 2),
             load=self.load,
             force_threshold=self.p.contact_force_threshold,
             max_speed=self.p.max_speed,
@@ -205,6 +206,7 @@ class PlannerNode(Node):
             objective=result.objective,
             target_edge=result.target_edge if dock else -1,
             reason=result.reason,
+            target_point=result.target_point,
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
         self.cycles.append(

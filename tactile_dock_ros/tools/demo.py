@@ -1,11 +1,13 @@
 """make demo: bring up the mock profile, run one docking episode, report and plot it.
 
     python -m tactile_dock_ros.tools.demo [--problem sloper] [--seed 0] [--png episode.png]
+        [--bag DIR]
 
 Starts the five nodes of ``launch/tactile_dock.launch.xml profile:=mock`` as processes (what
 ``ros2 launch`` would start), triggers ``/start_episode``, prints one line per cycle, the result
 and the latency breakdown, writes the episode figure, and exits 0 only when the tool DOCKED.
-Node logs go to ``--log-dir``.
+Node logs go to ``--log-dir``; ``--bag DIR`` also records the episode's topics as a rosbag2 bag
+for ``python -m tactile_dock_ros.tools.replay DIR``.
 """
 
 from __future__ import annotations
@@ -25,8 +27,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--prior-source", default="depth", choices=("depth", "problem"))
     parser.add_argument("--png", type=Path, default=Path("episode.png"))
     parser.add_argument("--log-dir", type=Path, default=None, help="node logs (default: temp)")
+    parser.add_argument("--bag", type=Path, default=None, help="record a rosbag2 bag here (new)")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds for the episode")
     args = parser.parse_args(argv)
+    if args.bag is not None and args.bag.exists():
+        parser.error(f"--bag {args.bag} exists; rosbag2 never overwrites a bag")
     # An isolated DDS domain unless the caller chose one.
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(100, 200)))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -64,6 +69,14 @@ def main(argv: list[str] | None = None) -> int:
     print(episode.latency_table(record))
     episode.plot(record, args.png)
     print(f"wrote {args.png}")
+    if args.bag is not None:
+        from tactile_dock_ros.tools import bag
+
+        count = bag.write(args.bag, record.messages)
+        print(
+            f"wrote {count} messages to {args.bag}; "
+            f"replay: python -m tactile_dock_ros.tools.replay {args.bag}"
+        )
     return 0 if record.state == "DOCKED" else 1
 
 

@@ -26,6 +26,7 @@ from tactile_dock_ros.msg import (
     ShapeSamples,
 )
 from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.tools import bag, figures
 
 FINAL_STATES = ("DOCKED", "GAVE_UP", "ABORTED")
 
@@ -44,6 +45,7 @@ class EpisodeRecord:
     status: DiagnosticStatus | None = None
     command_speeds: list = field(default_factory=list)  # m/s of every command to the arm
     wall_seconds: float = 0.0
+    messages: list = field(default_factory=list)  # (topic, receive ns, msg) for tools.bag.write
 
     @property
     def state(self) -> str:
@@ -79,27 +81,36 @@ class EpisodeClient(Node):
         self.record = EpisodeRecord()
         self.printed = 0
         self.start_client = self.create_client(Trigger, "start_episode")
+        keep = {
+            attribute: lambda m, a=attribute: setattr(self.record, a, m)
+            for attribute in ("prior", "truth", "history", "status")
+        }
         subscriptions = [
-            (ShapeDistribution, "terrain_prior", "prior", qos.LATCHED),
-            (ShapeDistribution, "/mock_hardware/ground_truth", "truth", qos.LATCHED),
-            (ContactHistory, "contact_history", "history", qos.LATCHED),
-            (DiagnosticStatus, "episode_status", "status", qos.LATCHED),
+            (ShapeDistribution, "/terrain_prior", keep["prior"], qos.LATCHED),
+            (ShapeDistribution, "/mock_hardware/ground_truth", keep["truth"], qos.LATCHED),
+            (ContactHistory, "/contact_history", keep["history"], qos.LATCHED),
+            (DiagnosticStatus, "/episode_status", keep["status"], qos.LATCHED),
+            (ShapeSamples, "/shape_samples", self.record.samples.append, qos.LATCHED),
+            (DockingPlan, "/plan", self.on_plan, qos.EVENTS),
+            (ExecutionReport, "/execution_report", self.record.reports.append, qos.EVENTS),
         ]
-        for msg_type, topic, attribute, profile in subscriptions:
-            self.create_subscription(
-                msg_type, topic, lambda m, a=attribute: setattr(self.record, a, m), profile
-            )
-        self.create_subscription(
-            ShapeSamples, "shape_samples", self.record.samples.append, qos.LATCHED
-        )
-        self.create_subscription(DockingPlan, "plan", self.on_plan, qos.EVENTS)
-        self.create_subscription(
-            ExecutionReport, "execution_report", self.record.reports.append, qos.EVENTS
-        )
+        for msg_type, topic, callback, profile in subscriptions:
+            if topic in bag.EPISODE_TOPICS:
+                callback = self._recorded(topic, callback)
+            self.create_subscription(msg_type, topic, callback, profile)
         self.create_subscription(
             DiagnosticStatus, "/perception/status", self.on_perception, qos.LATCHED
         )
         self.create_subscription(TwistStamped, "/arm/cmd_twist", self.on_command, qos.COMMAND)
+
+    def _recorded(self, topic: str, callback):
+        """``callback`` that first logs the message for a bag, as ``ros2 bag record`` would."""
+
+        def record(msg) -> None:
+            self.record.messages.append((topic, self.get_clock().now().nanoseconds, msg))
+            callback(msg)
+
+        return record
 
     def on_plan(self, msg: DockingPlan) -> None:
         """Plans are resent until executed: keep one of each (plan_id, stamp)."""
@@ -195,34 +206,26 @@ def latency_table(record: EpisodeRecord) -> str:
 
 def plot(record: EpisodeRecord, path: Path) -> None:
     """Episode figure: truth, prior mean, last posterior samples, history, planned paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from tactile_dock_ros.nodes.markers import STATUS_RGBA
-
+    plt = figures.pyplot()
     fig, ax = plt.subplots(figsize=(7, 6))
     if record.samples:
         for v in convert.samples_from_msg(record.samples[-1])[:30]:
             ax.plot(v[:, 0], v[:, 1], color=(0.2, 0.4, 1.0), alpha=0.15, lw=1)
-    if record.prior is not None:
-        mean = convert.shape_from_msg(record.prior).mean_vertices
-        ax.plot(mean[:, 0], mean[:, 1], "b--", lw=1, label="prior mean")
-    if record.truth is not None:
-        truth = convert.shape_from_msg(record.truth).mean_vertices
-        ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2, label="ground truth")
+    for msg, fmt, width, label in (
+        (record.prior, "b--", 1, "prior mean"),
+        (record.truth, "k-", 2, "ground truth"),
+    ):
+        if msg is not None:
+            shape = convert.shape_from_msg(msg)
+            figures.outline(ax, shape.mean_vertices, shape.closed, fmt, lw=width, label=label)
     for plan in record.plans:
         w = np.array([[p.x, p.y] for p in plan.waypoints]).reshape(-1, 2)
         ax.plot(w[:, 0], w[:, 1], ":", color="0.4", lw=1)
-    if record.history is not None and record.history.segments:
-        history = convert.history_from_segments(record.history.segments)
-        for a, b, s in zip(history.a, history.b, history.status, strict=True):
-            ax.plot([a[0], b[0]], [a[1], b[1]], color=STATUS_RGBA[int(s)][:3], lw=3)
+    if record.history is not None:
+        figures.history(ax, convert.history_from_segments(record.history.segments), width=3)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"episode: {record.state} after {len(record.plans)} cycles")
     ax.legend(loc="best")
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    figures.save(fig, path, dpi=120)

@@ -16,24 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from ..core import explore, problems
-from ..core.history import Status
-
-STATUS_COLOURS = {
-    Status.FREE: "tab:green",
-    Status.COLLIDE: "tab:red",
-    Status.STICK: "tab:purple",
-    Status.SLIP_LEFT: "tab:orange",
-    Status.SLIP_RIGHT: "gold",
-}
+from . import figures
 
 
 def render(problem, truth: np.ndarray, result: explore.EpisodeResult, out: Path) -> None:
     """Write a PNG of ``result`` (one panel per cycle, at most 6 shown: first and last ones)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = figures.pyplot()
     log = result.cycles_log
     shown = log if len(log) <= 6 else [*log[:3], *log[-3:]]
     cols = max(1, min(3, len(shown)))
@@ -45,15 +33,10 @@ def render(problem, truth: np.ndarray, result: explore.EpisodeResult, out: Path)
         ax.axis("off")
     for ax, entry in zip(axes.ravel(), shown, strict=False):
         for verts in entry.samples:
-            ring = np.vstack([verts, verts[:1]]) if closed else verts
-            ax.plot(*ring.T, color="0.6", lw=0.5, alpha=0.5)
-        ring = np.vstack([truth, truth[:1]]) if closed else truth
-        ax.plot(*ring.T, color="k", lw=1.5)
-        drawn = entry.history_length  # what the robot had felt when it planned this cycle
-        for a, b, s in zip(
-            history.a[:drawn], history.b[:drawn], history.status[:drawn], strict=True
-        ):
-            ax.plot([a[0], b[0]], [a[1], b[1]], color=STATUS_COLOURS[Status(s)], lw=2.5)
+            figures.outline(ax, verts, closed, color="0.6", lw=0.5, alpha=0.5)
+        figures.outline(ax, truth, closed, color="k", lw=1.5)
+        # what the robot had felt when it planned this cycle
+        figures.history(ax, history.subset(np.arange(entry.history_length)))
         executed = [c.plan.path for c in log[: entry.cycle] if c.plan.decision == "dock"]
         for path in executed:
             ax.plot(*path.T, color="tab:blue", lw=0.8, alpha=0.6)
@@ -70,9 +53,7 @@ def render(problem, truth: np.ndarray, result: explore.EpisodeResult, out: Path)
         ax.set_aspect("equal")
     fig.suptitle(f"{problem.name}: {result.outcome} after {result.cycles} moves", fontsize=11)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
+    figures.save(fig, out)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,290 @@
+"""Replay a recorded docking episode offline: re-plan every cycle from what the planner had.
+
+    python -m tactile_dock_ros.tools.replay BAG [--config config/robot.yaml]
+        [--give-up-threshold P] [--contact-resolution M] [--compliant | --no-compliant]
+        [--resample N [--method hmc] [--seed S]] [--png cycles.png] [--json replay.json]
+
+BAG is a rosbag2 directory with the topics of ``tools.bag.EPISODE_TOPICS`` (record them on the
+robot with ``ros2 bag record``; ``make demo DEMO_ARGS="--bag DIR"`` records the mock episode).
+For each recorded plan (one per cycle; the planner's resent copies are skipped) the planner
+node's inputs are rebuilt: the prior, the posterior samples it planned with (the newest
+``/shape_samples`` conditioned on the whole history), the contact history, the tool position
+(the plan's first waypoint) and the aim points of the episode's earlier plans (eq. 24). Then
+``core.planner.plan`` runs again with the planner parameters of ``--config`` (the parameter file
+the robot ran with; the planner node's defaults otherwise), the load direction and motion model
+of the recorded plan, and any override given here. The planner is deterministic: with the
+recorded parameters every replayed plan equals the recorded one, so a difference means the code
+or a parameter changed. ``--resample N`` plans with N fresh posterior samples instead
+(``core.sampling.sample_posterior`` from the prior and history, cold-started, seeded), which
+separates inference noise from planning. Exit status 0 when every cycle was replayed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..core import planner
+from ..core.history import History
+from ..core.sampling import sample_posterior
+from ..core.shape import GaussianShape
+from . import bag, figures
+
+PATH_TOLERANCE_M = 1e-9  # replayed and recorded paths "agree" below this
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """What the planner node had when it published one recorded plan."""
+
+    episode: int  # 1-based, counted in the bag
+    prior: GaussianShape
+    history: History
+    samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
+    previous_targets: np.ndarray  # (k, 2) aim points of the episode's earlier DOCK plans
+    recorded: object  # nodes.convert.PlanCommand
+    outcome: str  # the executor's report for the plan ("-": none recorded)
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.recorded.waypoints[0]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Planner parameters of the replay (units as in the planner node)."""
+
+    give_up_threshold: float
+    contact_resolution: float  # metres
+    compliant: bool | None  # None: as recorded in each plan
+
+
+def load_cycles(path: Path, log=print) -> list[Cycle]:
+    """The cycles of every episode in the bag at ``path``, in order.
+
+    Raises ``bag.BagError`` when the bag cannot be read or holds no plan with its inputs.
+    """
+    from ..nodes import convert
+
+    prior = history = None
+    samples: dict[int, np.ndarray] = {}  # history length -> newest samples
+    reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
+    seen, targets, pending = set(), [], []
+    episode = 0
+    for topic, _, msg in bag.read(path):
+        if topic == "/terrain_prior":
+            prior = convert.shape_from_msg(msg)
+        elif topic == "/contact_history":
+            history = convert.history_from_segments(msg.segments)
+        elif topic == "/shape_samples" and msg.num_samples > 0:
+            samples[int(msg.history_length)] = convert.samples_from_msg(msg)
+        elif topic == "/execution_report":
+            reports[(episode, int(msg.plan_id))] = convert.report_from_msg(msg).outcome_name
+        elif topic == "/plan":
+            key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
+            if key in seen:
+                continue  # the planner resends a plan until its report arrives
+            seen.add(key)
+            command = convert.plan_from_msg(msg)
+            if command.plan_id == 1:
+                episode, targets = episode + 1, []
+            if prior is None or history is None or len(history) not in samples:
+                log(
+                    f"episode {episode} plan {command.plan_id}: skipped, its prior, history or "
+                    "samples are not in the bag"
+                )
+                continue
+            if len(command.waypoints) == 0:
+                log(f"episode {episode} plan {command.plan_id}: skipped, no tool position")
+                continue
+            pending.append(
+                (episode, prior, history, samples[len(history)], np.array(targets), command)
+            )
+            if command.dock:
+                targets = [*targets, command.target_point]
+    cycles = [
+        Cycle(e, pr, h, s, t.reshape(-1, 2), c, reports.get((e, c.plan_id), "-"))
+        for e, pr, h, s, t, c in pending
+    ]
+    if not cycles:
+        raise bag.BagError(f"{path}: no plan with its inputs recorded (topics: /plan, ...)")
+    return cycles
+
+
+def replan(cycle: Cycle, settings: Settings, samples: np.ndarray | None = None) -> planner.Plan:
+    """``core.planner.plan`` on the cycle's inputs (or on ``samples`` instead of the recorded)."""
+    compliant = cycle.recorded.compliant if settings.compliant is None else settings.compliant
+    return planner.plan(
+        cycle.samples if samples is None else samples,
+        cycle.prior,
+        cycle.history,
+        cycle.start,
+        cycle.recorded.load,
+        cycle.prior.friction,
+        settings.contact_resolution,
+        cycle.previous_targets,
+        give_up_threshold=settings.give_up_threshold,
+        compliant=compliant,
+    )
+
+
+def compare(cycle: Cycle, plan: planner.Plan) -> dict:
+    """Recorded vs replayed decision, target edge, P_dock and path of one cycle."""
+    recorded = cycle.recorded
+    decision = "dock" if recorded.dock else "give_up"
+    same = decision == plan.decision and abs(recorded.p_dock - plan.p_dock) <= 1e-9
+    if same and plan.decision == "dock":
+        same = (
+            recorded.target_edge == plan.target_edge
+            and recorded.waypoints.shape == plan.path.shape
+            and np.allclose(recorded.waypoints, plan.path, rtol=0.0, atol=PATH_TOLERANCE_M)
+        )
+    return {
+        "episode": cycle.episode,
+        "plan_id": recorded.plan_id,
+        "history_segments": len(cycle.history),
+        "recorded": {
+            "decision": decision,
+            "target_edge": recorded.target_edge,
+            "p_dock": recorded.p_dock,
+            "outcome": cycle.outcome,
+        },
+        "replayed": {
+            "decision": plan.decision,
+            "target_edge": plan.target_edge,
+            "p_dock": float(plan.p_dock),
+            "reason": plan.reason,
+        },
+        "same": bool(same),
+    }
+
+
+def settings_from(args: argparse.Namespace) -> Settings:
+    """Planner parameters: node defaults < ``--config`` file < command-line overrides."""
+    from ..nodes.planner_node import PARAMS
+
+    table = {p.name: p for p in PARAMS}
+    values = {name: table[name].default for name in ("give_up_threshold", "contact_resolution")}
+    if args.config is not None:
+        document = yaml.safe_load(Path(args.config).read_text()) or {}
+        for section in ("/**", "planner", "/planner"):
+            values.update(
+                {
+                    k: v
+                    for k, v in (document.get(section) or {}).get("ros__parameters", {}).items()
+                    if k in values
+                }
+            )
+    for name in values:
+        override = getattr(args, name)
+        if override is not None:
+            values[name] = override
+        table[name].check(values[name])  # the node's own range check
+    return Settings(
+        float(values["give_up_threshold"]), float(values["contact_resolution"]), args.compliant
+    )
+
+
+def render(cycles: list[Cycle], plans: list[planner.Plan], path: Path) -> None:
+    """One panel per cycle: samples (grey), history, recorded path (blue), replayed (orange)."""
+    plt = figures.pyplot()
+    cols = min(3, len(cycles))
+    rows = int(np.ceil(len(cycles) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 4.5 * rows), squeeze=False)
+    for ax in axes.ravel()[len(cycles) :]:
+        ax.axis("off")
+    for ax, cycle, plan in zip(axes.ravel(), cycles, plans, strict=False):
+        for vertices in cycle.samples[:30]:
+            figures.outline(ax, vertices, cycle.prior.closed, color="0.6", lw=0.5, alpha=0.5)
+        figures.history(ax, cycle.history)
+        if cycle.recorded.dock:
+            ax.plot(*cycle.recorded.waypoints.T, color="tab:blue", lw=2.0, label="recorded")
+        if plan.decision == "dock":
+            ax.plot(*plan.path.T, "--", color="tab:orange", lw=1.5, label="replayed")
+        ax.plot(*cycle.start, "k.", ms=8)
+        ax.set_title(
+            f"episode {cycle.episode} plan {cycle.recorded.plan_id}: recorded P_dock "
+            f"{cycle.recorded.p_dock:.2f} -> {cycle.outcome}\nreplayed {plan.decision} "
+            f"P_dock {plan.p_dock:.2f}",
+            fontsize=9,
+        )
+        ax.set_aspect("equal")
+    axes.ravel()[0].legend(loc="best", fontsize=8)
+    figures.save(fig, path)
+
+
+def _format(row: dict) -> str:
+    rec, rep = row["recorded"], row["replayed"]
+    mark = "same" if row["same"] else "DIFFERENT"
+    return (
+        f"episode {row['episode']} plan {row['plan_id']} ({row['history_segments']} segments): "
+        f"recorded {rec['decision']} edge {rec['target_edge']} P_dock={rec['p_dock']:.3f} -> "
+        f"{rec['outcome']}; replayed {rep['decision']} edge {rep['target_edge']} "
+        f"P_dock={rep['p_dock']:.3f} [{mark}]"
+        + ("" if rep["decision"] == "dock" else f" ({rep['reason']})")
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m tactile_dock_ros.tools.replay",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("bag", type=Path, help="rosbag2 directory")
+    parser.add_argument("--config", type=Path, help="parameter file the planner node ran with")
+    parser.add_argument("--give-up-threshold", type=float, help="override (probability)")
+    parser.add_argument("--contact-resolution", type=float, help="override, metres (w, eq. 24)")
+    parser.add_argument(
+        "--compliant",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="override the motion model (default: as recorded in each plan)",
+    )
+    parser.add_argument("--resample", type=int, default=0, metavar="N", help="fresh samples")
+    parser.add_argument("--method", default="hmc", choices=("hmc", "gibbs", "mh", "rejection"))
+    parser.add_argument("--seed", type=int, default=0, help="seed of --resample")
+    parser.add_argument("--png", type=Path, help="write one panel per cycle")
+    parser.add_argument("--json", type=Path, help="write the comparison as JSON")
+    args = parser.parse_args(argv)
+    if args.resample < 0 or args.resample == 1:
+        parser.error("--resample needs N >= 2 samples (the planner fits their moments)")
+    try:
+        settings = settings_from(args)
+        cycles = load_cycles(args.bag)
+    except (bag.BagError, ValueError, OSError) as err:
+        print(f"replay: {err}", file=sys.stderr)
+        return 2
+    print(
+        f"{len(cycles)} recorded plans; give_up_threshold {settings.give_up_threshold:g}, "
+        f"contact_resolution {settings.contact_resolution:g} m"
+    )
+    rng = np.random.default_rng(args.seed)
+    rows, plans = [], []
+    for cycle in cycles:
+        fresh = None
+        if args.resample:
+            fresh = sample_posterior(
+                cycle.prior, cycle.history, args.resample, rng, method=args.method
+            ).vertices
+        plans.append(replan(cycle, settings, fresh))
+        rows.append(compare(cycle, plans[-1]))
+        print(_format(rows[-1]))
+    print(f"{sum(r['same'] for r in rows)}/{len(rows)} cycles replayed to the same plan")
+    if args.png is not None:
+        render(cycles, plans, args.png)
+        print(f"wrote {args.png}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(rows, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
