@@ -18,16 +18,20 @@ DT = 0.01
 SETTINGS = Settings()
 
 
-def _plan(waypoints, speed=0.1, threshold=3.0):
+def _plan(waypoints, speed=0.1, threshold=3.0, compliant=False):
     return PlanCommand(
-        1, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed, False,
+        1, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed, compliant,
         0.5, 0.5, 0, "",
     )  # fmt: skip
 
 
-def _execute(terrain, waypoints, limits=LIMITS, settings=SETTINGS, speed=0.1, start=None):
-    sim = PointToolSim(terrain, False, 0.5, 500.0, waypoints[0] if start is None else start)
-    run = GuardedRun(_plan(waypoints, speed), sim.tool, limits, settings, 0.0)
+def _execute(
+    terrain, waypoints, limits=LIMITS, settings=SETTINGS, speed=0.1, start=None,
+    compliant=False, lateral_stiffness=None,
+):  # fmt: skip
+    start = waypoints[0] if start is None else start
+    sim = PointToolSim(terrain, False, 0.5, 500.0, start, lateral_stiffness=lateral_stiffness)
+    run = GuardedRun(_plan(waypoints, speed, compliant=compliant), sim.tool, limits, settings, 0.0)
     t, commanded = 0.0, []
     for _ in range(10_000):
         if run.done:
@@ -62,6 +66,45 @@ def test_steep_slope_slips_to_the_correct_side_and_retreats(terrain, status, sid
     contact = 0.5 * (run.history.a[-1] + run.history.b[-1])
     assert np.sign(contact[0]) in (0.0, side)  # slid downhill before or during the test
     assert np.linalg.norm(sim.force) < 1e-9  # retreated into free space
+
+
+V_TRAP = np.array([[0.5, 0.5], [0.0, 0.0], [-0.5, 0.5]])  # two 45 degree slopes, solid below
+SLOPE_THEN_CLIFF = np.array([[0.5, -0.8], [0.5, -0.5], [-0.5, 0.5]])  # a wall drops at x = 0.5
+
+
+def test_compliant_plan_follows_a_slide_into_a_vertex_trap_and_docks():
+    loading = [[0.05, 0.3], [0.05, -0.1]]  # meets the right slope 5 cm from the vertex
+    stiff, *_ = _execute(V_TRAP, loading, lateral_stiffness=25.0)
+    assert stiff.outcome is Outcome.CONTACT_FAILED  # non-compliant: the slip ends the attempt
+    run, sim, _ = _execute(V_TRAP, loading, compliant=True, lateral_stiffness=25.0)
+    assert run.outcome is Outcome.DOCKED, run.detail
+    assert np.linalg.norm(run.stop_point) < 0.005  # held at the vertex
+    assert list(run.history.status) == [Status.FREE, Status.SLIP_RIGHT]  # the first contact
+    contact = 0.5 * (run.history.a[-1] + run.history.b[-1])
+    # on the right slope, between the first touch and the vertex (force-threshold detection)
+    assert 0.0 < contact[0] <= 0.05 and contact[1] == pytest.approx(contact[0], abs=1e-3)
+    assert SETTINGS.load_force <= np.linalg.norm(sim.force) < LIMITS.max_force
+
+
+def test_compliant_slide_that_loses_contact_fails_and_retreats():
+    run, sim, _ = _execute(
+        SLOPE_THEN_CLIFF, [[0.4, 0.3], [0.4, -0.6]], compliant=True, lateral_stiffness=25.0
+    )
+    assert run.outcome is Outcome.CONTACT_FAILED and "lost contact" in run.detail, run.detail
+    assert run.history.status[-1] == Status.SLIP_LEFT
+    assert run.stop_point[0] > 0.48  # slid from x = 0.4 to the edge of the cliff
+    assert np.linalg.norm(sim.force) < 3.0  # no more than the lateral spring's pull
+
+
+def test_compliant_plan_sticks_at_once_on_a_floor_and_bounds_long_slides():
+    run, *_ = _execute(FLOOR, [[0.0, 0.3], [0.0, -0.1]], compliant=True)
+    assert run.outcome is Outcome.DOCKED and run.history.status[-1] == Status.STICK
+    short = Settings(max_slide=0.05)
+    run, *_ = _execute(
+        SLOPE_THEN_CLIFF, [[0.4, 0.3], [0.4, -0.6]], settings=short, compliant=True,
+        lateral_stiffness=25.0,
+    )  # fmt: skip
+    assert run.outcome is Outcome.CONTACT_FAILED and "max_slide" in run.detail
 
 
 def test_contact_on_a_prefix_move_is_a_collision():

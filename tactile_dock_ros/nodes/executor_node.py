@@ -41,6 +41,10 @@ PARAMS = [
     Param("load_speed", 0.02, "pushing speed of the stick/slip test", "m/s", 1e-4, 1.0),
     Param("load_force", 12.0, "loading test pushes up to this force", "N", 0.1, 500.0),
     Param("retreat_distance", 0.02, "back-off after a failed contact", "m", 0.0, 0.2),
+    Param(
+        "settle_time", 0.3, "compliant slide: held this still under load = stuck", "s", 0.0, 10.0
+    ),
+    Param("max_slide", 0.3, "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
     Param("approach_gain", 4.0, "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
     Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
@@ -68,6 +72,8 @@ class ExecutorNode(Node):
             load_force=self.p.load_force,
             load_speed=self.p.load_speed,
             retreat_distance=self.p.retreat_distance,
+            settle_time=self.p.settle_time,
+            max_slide=self.p.max_slide,
             approach_gain=self.p.approach_gain,
         )
         self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)

@@ -12,8 +12,19 @@ Decisions where the paper leaves the robot side open:
   the plan speed until the force reaches ``load_force``. If the tool moved less than
   ``slip_tolerance`` from the contact point it sticks (DOCKED, the tool holds there); otherwise
   it slipped, left (CCW from the motion) or right (CW) by the sign of the cross product of the
-  motion and the displacement. A slip ends the attempt (the non-compliant docking model): the
-  executor does not follow a slide to a later stick.
+  motion and the displacement. A slip ends the attempt when the plan is non-compliant.
+* Compliant plans (``plan.compliant``, Sec. III-A2 and the compliant model of V-A) need an arm
+  that is compliant across its motion (hardware or impedance control; the mock's
+  ``lateral_stiffness``): after a slip the tool keeps pushing along the load and slides. It is
+  stuck (DOCKED where it stopped, e.g. trapped at a vertex) once it holds still within
+  ``slip_tolerance`` for ``settle_time`` under ``load_force`` (the push pauses at that force, so
+  it never grows towards the limit); the attempt fails when the tool moves straight along the
+  load for ``contact_resolution`` with less than the plan's contact force (free space: the
+  surface turned away, the separation of ``core.simulate``) or the slide exceeds ``max_slide``.
+  The evidence is that of ``core.simulate.guarded_path``: the status of the first contact (the
+  slip), even when the slide then sticks. A finite lateral stiffness pulls back as the tool
+  slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may stop on a slope that the
+  paper's ideal compliance would slide down; the test reports the hold the arm actually has.
 * Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
   move, backed off by the contact resolution w from the contact point c, and a contact segment
   c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
@@ -62,6 +73,8 @@ class Settings:
     retreat_distance: float = 0.02
     approach_gain: float = 4.0  # speed = min(max_speed, gain * remaining distance)
     time_margin: float = 5.0  # time budget = 3 * path length / speed + margin
+    settle_time: float = 0.3  # a compliant slide is stuck after holding still this long
+    max_slide: float = 0.3  # a compliant slide longer than this fails
 
 
 class Outcome(Enum):
@@ -76,6 +89,7 @@ class Outcome(Enum):
 class _Phase(Enum):
     MOVE = "move"
     LOAD_TEST = "load test"
+    SLIDE = "compliant slide"
     RETREAT = "retreat"
     DONE = "done"
 
@@ -119,6 +133,9 @@ class GuardedRun:
     _anchor: np.ndarray | None = None
     _segments: list = field(default_factory=list)
     _budget: float = field(init=False)
+    _t: float = 0.0  # time of the current tick, seconds
+    _slip: Status | None = None  # first-contact status of a compliant slide
+    _still: tuple = ()  # (position, since seconds): where a compliant slide last rested
 
     def __post_init__(self) -> None:
         tool = np.asarray(self.tool, float)
@@ -129,6 +146,9 @@ class GuardedRun:
         self._speed = min(self.plan.max_speed, self.limits.max_speed)
         length = np.linalg.norm(np.diff(self._path, axis=0), axis=1).sum()
         self._budget = 3.0 * length / self._speed + self.settings.time_margin
+        if self.plan.compliant:  # room for a slide at the loading speed, and for settling
+            slide = self.settings.max_slide / min(self.settings.load_speed, self._speed)
+            self._budget += slide + self.settings.settle_time
         if reason := refusal(self.plan, tool, self.limits, self.settings):
             self._finish(Outcome.ABORTED, f"refused: {reason}", tool)
 
@@ -162,9 +182,11 @@ class GuardedRun:
             return self.abort(f"force {magnitude:.1f} N above the limit", tool)
         if t - self.t_start > self._budget:
             return self.abort(f"{self._phase.value} exceeded the {self._budget:.1f} s budget", tool)
+        self._t = t
         velocity = {
             _Phase.MOVE: self._step_move,
             _Phase.LOAD_TEST: self._step_load_test,
+            _Phase.SLIDE: self._step_slide,
             _Phase.RETREAT: self._step_retreat,
         }[self._phase](tool, magnitude)
         speed = float(np.linalg.norm(velocity))
@@ -219,12 +241,43 @@ class GuardedRun:
         if np.linalg.norm(moved) > self.settings.slip_tolerance:
             cross = d[0] * moved[1] - d[1] * moved[0]
             status = Status.SLIP_LEFT if cross > 0 else Status.SLIP_RIGHT
+            if self.plan.compliant:
+                self._phase, self._slip, self._still = _Phase.SLIDE, status, (tool.copy(), self._t)
+                return self._step_slide(tool, force)
             self._record_contact(self._anchor, d, status)
             return self._start_retreat(tool, f"slipped {status.name.lower()} under the load")
         if force >= self.settings.load_force:
             self._record_contact(self._anchor, d, Status.STICK)
             self._finish(Outcome.DOCKED, f"stuck under {force:.1f} N", tool)
             return np.zeros(2)
+        return d * min(self.settings.load_speed, self._speed)
+
+    def _step_slide(self, tool: np.ndarray, force: float) -> np.ndarray:
+        d = self._direction()
+        slid = float(np.linalg.norm(tool - self._anchor))
+        how = f"slid {slid:.3f} m {self._slip.name.lower().replace('slip_', '')}"
+        rest, since = self._still
+        moved = tool - rest
+        across = abs(d[0] * moved[1] - d[1] * moved[0])
+        # Moving straight along the load with little force since the last rest: free space.
+        free = (
+            across <= self.settings.slip_tolerance
+            and moved @ d >= self.settings.contact_resolution
+            and force < self.plan.force_threshold
+        )
+        if free or slid > self.settings.max_slide:
+            self._record_contact(self._anchor, d, self._slip)
+            why = "lost contact" if free else "exceeded max_slide"
+            return self._start_retreat(tool, f"{how} and {why} under the load")
+        if across > self.settings.slip_tolerance or moved @ d < -self.settings.slip_tolerance:
+            self._still = (tool.copy(), self._t)  # still sliding along the surface
+        elif np.linalg.norm(moved) <= self.settings.slip_tolerance:
+            if force >= self.settings.load_force and self._t - since >= self.settings.settle_time:
+                self._record_contact(self._anchor, d, self._slip)
+                self._finish(Outcome.DOCKED, f"{how}, then stuck under {force:.1f} N", tool)
+                return np.zeros(2)
+        if force >= self.settings.load_force:
+            return np.zeros(2)  # hold the load: friction either holds or the slide resumes
         return d * min(self.settings.load_speed, self._speed)
 
     def _start_retreat(self, tool: np.ndarray, why: str) -> np.ndarray:
