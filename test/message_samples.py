@@ -62,6 +62,7 @@ def build() -> dict:
         ),
         "DockingPlan": DockingPlan(
             header=_header(4),
+            episode=1795315710,
             plan_id=42,
             decision=DockingPlan.GIVE_UP,
             waypoints=[Point(x=1.0, y=2.0, z=0.0), Point(x=1.5, y=1.0, z=0.0)],
@@ -77,6 +78,7 @@ def build() -> dict:
         ),
         "ExecutionReport": ExecutionReport(
             header=_header(5),
+            episode=1795315710,
             plan_id=42,
             outcome=ExecutionReport.CONTACT_FAILED,
             segments=segments[:2],

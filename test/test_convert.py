@@ -41,6 +41,7 @@ def _plan(**changes):
         target_edge=4,
         reason="best site",
         target_point=np.array([0.1, 0.05]),
+        episode=12,
     )
     fields.update(changes)
     return convert.PlanCommand(**fields)
@@ -120,6 +121,7 @@ def test_plan_round_trip():
     back = convert.plan_from_msg(convert.plan_to_msg(plan, HEADER))
     np.testing.assert_array_equal(back.waypoints, plan.waypoints)
     assert (back.plan_id, back.dock, back.target_edge, back.reason) == (3, True, 4, "best site")
+    assert back.episode == plan.episode == 12
     assert back.force_threshold == 3.0 and back.max_speed == 0.1
     np.testing.assert_array_equal(back.target_point, plan.target_point)
 
@@ -131,6 +133,7 @@ def test_plan_round_trip():
         (_plan(waypoints=np.array([[0.0, 0.5], [0.1, 0.2], [0.1, 0.2]])), "zero length"),
         (_plan(load=np.array([0.0, -2.0])), "unit vector"),
         (_plan(max_speed=0.0), "must be > 0"),
+        (_plan(load=np.array([0.6, -0.8])), "does not point along load_direction"),
         (_plan(waypoints=np.array([[0.0, np.nan], [0.1, 0.2]])), "NaN"),
     ],
 )
@@ -150,12 +153,12 @@ def test_give_up_plan_needs_no_waypoints_but_decision_must_be_known():
 
 def test_report_round_trip_and_unknown_outcome():
     report = convert.Report(
-        5, ExecutionReport.CONTACT_FAILED, _history(), np.array([0.1, 0.2]), "x"
+        5, ExecutionReport.CONTACT_FAILED, _history(), np.array([0.1, 0.2]), "x", episode=9
     )
     msg = convert.report_to_msg(report, HEADER)
     assert all(s.plan_id == 5 for s in msg.segments)
     back = convert.report_from_msg(msg)
-    assert back.outcome_name == "CONTACT_FAILED" and back.detail == "x"
+    assert back.outcome_name == "CONTACT_FAILED" and back.detail == "x" and back.episode == 9
     np.testing.assert_array_equal(back.history.status, report.history.status)
     msg.outcome = 42
     with pytest.raises(MessageError, match="unknown outcome"):
@@ -198,4 +201,24 @@ def test_pose_and_wrench_map_into_the_plane():
     wrench = WrenchStamped()
     wrench.wrench.force.z = float("inf")
     with pytest.raises(MessageError, match="wrench"):
-        convert.wrench_force(wrench, plane)
+        convert.wrench_force(wrench)
+
+
+def test_hardware_messages_round_trip_and_frames_are_checked():
+    header = convert.Header(frame_id="base_link")
+    pose = convert.pose_to_msg(np.array([0.1, 0.2, 0.3]), header)
+    np.testing.assert_array_equal(convert.pose_rotation(pose), np.eye(3))
+    force = np.array([1.0, -2.0, 3.0])
+    np.testing.assert_array_equal(convert.wrench_force(convert.wrench_to_msg(force, header)), force)
+    twist = convert.twist_to_msg(np.array([0.01, 0.0, -0.02]), header)
+    np.testing.assert_array_equal(convert.twist_velocity(twist, _vertical_plane()), [0.01, -0.02])
+    convert.check_frame("pose", pose, "base_link")
+    pose.header.frame_id = "tool0"
+    with pytest.raises(MessageError, match="'tool0', expected 'base_link'"):
+        convert.check_frame("pose", pose, "base_link")
+    pose.pose.orientation.x, pose.pose.orientation.w = 1.0, 1.0  # not normalized
+    with pytest.raises(MessageError, match="unit quaternion"):
+        convert.pose_rotation(pose)
+    pose.pose.orientation.x, pose.pose.orientation.w = 0.0, 0.0
+    pose.pose.orientation.z = 1.0  # half a turn about z
+    np.testing.assert_allclose(convert.pose_rotation(pose) @ [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0])

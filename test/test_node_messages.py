@@ -1,7 +1,5 @@
 """Malformed messages are logged and dropped without corrupting a node's state (in-process)."""
 
-import importlib.util
-
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
@@ -12,16 +10,6 @@ from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 
 pytestmark = pytest.mark.dds
-
-
-def _needs(module: str):
-    return pytest.mark.skipif(
-        importlib.util.find_spec(f"tactile_dock_ros.core.{module}") is None,
-        reason=f"tactile_dock_ros.core.{module} is not in this tree yet",
-    )
-
-
-needs_sampling, needs_planner = _needs("sampling"), _needs("planner")
 
 
 def _plan_msg(plan_id, waypoints):
@@ -94,12 +82,56 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     assert "sensor timeout" in third.detail
 
 
+@pytest.mark.parametrize(
+    ("stop", "expected"),
+    [
+        ("episode_ended", "episode 0 is ABORTED"),
+        ("out_of_plane_force", "(3-D) above the limit"),  # 50 N along the plane normal
+    ],
+)
+def test_executor_stops_a_running_plan(stop, expected, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    spec = launch_nodes("mock")["executor"]
+    reports, commands, normal_force = [], [], [0.0]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
+        poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
+        statuses = driver.create_publisher(DiagnosticStatus, "episode_status", qos.LATCHED)
+        driver.create_subscription(ExecutionReport, "execution_report", reports.append, qos.EVENTS)
+        driver.create_subscription(TwistStamped, "/arm/cmd_twist", commands.append, qos.COMMAND)
+        publishers = (plans, poses, wrenches, statuses)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in publishers), 10)
+
+        def feed():  # live sensors, so that only the tested cause stops the plan
+            poses.publish(_pose(0.0, 0.6, 0.3))
+            wrench = WrenchStamped()
+            wrench.wrench.force.y = normal_force[0]  # base y = the plane's normal
+            wrenches.publish(wrench)
+            return node.run is not None and node.filter.ready and bool(commands)
+
+        plans.publish(_plan_msg(1, [[0.0, 0.3], [0.0, 0.1]]))  # episode 0
+        assert spin_until(executor, lambda: feed() and not _zero(commands[-1]), 10.0)
+        status = DiagnosticStatus(message="RUNNING", values=[KeyValue(key="episode", value="0")])
+        statuses.publish(status)
+        assert not spin_until(executor, lambda: feed() and reports, 0.5)  # its episode runs on
+        if stop == "episode_ended":
+            status.message = "ABORTED: no posterior samples within 60 s"
+            statuses.publish(status)
+        else:
+            normal_force[0] = 50.0
+        assert spin_until(executor, lambda: feed() is not None and reports, 10.0)
+        assert spin_until(executor, lambda: _zero(commands[-1]), 5.0)
+    report = convert.report_from_msg(reports[0])
+    assert report.outcome == ExecutionReport.ABORTED and expected in report.detail, report.detail
+
+
 def _zero(twist: TwistStamped) -> bool:
     v = twist.twist.linear
     return (v.x, v.y, v.z) == (0.0, 0.0, 0.0)
 
 
-@needs_sampling
 def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
     from tactile_dock_ros.msg import ContactHistory
 
@@ -119,13 +151,14 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
         bad_status.plan_id, bad_status.segments[0].status = 2, 17
         empty = convert.report_to_msg(good, convert.Header())
         empty.plan_id, empty.outcome = 3, 99
-        for report in (bad_status, empty, msg):
+        other_episode = convert.report_to_msg(good, convert.Header())
+        other_episode.plan_id, other_episode.episode = 7, 5  # late, or from a restarted planner
+        for report in (bad_status, empty, other_episode, msg):
             reports.publish(report)
         assert spin_until(executor, lambda: len(node.history) == 1, 10.0)
         assert node.handled_plans == {1}
 
 
-@needs_planner
 def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
     from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
 
@@ -156,19 +189,27 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
         assert node.history is None and node.prior is None and node.state == "IDLE"
 
 
-@needs_planner
-def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
+def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
+    from tactile_dock_ros.msg import ShapeDistribution
+
+    from tactile_dock_ros.core import problems
 
     spec = launch_nodes("mock")["planner"]
     statuses = []
     with node_with_driver(spec, tmp_path, ["-p", "planner:stage_timeout:=1.0"]) as (
-        _node, driver, executor,
+        node, driver, executor,
     ):  # fmt: skip
         driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         start = driver.create_client(Trigger, "start_episode")
         assert spin_until(executor, start.service_is_ready, 10.0)
+        refused = start.call_async(Trigger.Request())
+        assert spin_until(executor, refused.done, 10.0) and not refused.result().success
+        assert "terrain_prior" in refused.result().message  # says what is missing
+        prior.publish(convert.shape_to_msg(problems.get("sloper").prior, convert.Header()))
+        assert spin_until(executor, lambda: node.prior is not None, 10.0)
         future = start.call_async(Trigger.Request())
         assert spin_until(executor, future.done, 10.0) and future.result().success
         again = start.call_async(Trigger.Request())
@@ -179,7 +220,6 @@ def test_planner_aborts_an_episode_that_gets_no_samples(tmp_path):
     assert "posterior samples" in statuses[-1].message
 
 
-@needs_planner
 def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
@@ -190,7 +230,7 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
 
     spec = launch_nodes("mock")["planner"]
     statuses, plans = [], []
-    with node_with_driver(spec, tmp_path) as (_node, driver, executor):
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
         driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
         driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
         prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
@@ -206,11 +246,12 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
             ),
             10.0,
         )
+        shape = problems.get("sloper").prior
+        prior.publish(convert.shape_to_msg(shape, convert.Header()))
+        assert spin_until(executor, lambda: node.prior is not None, 10.0)
         future = start.call_async(Trigger.Request())
         assert spin_until(executor, future.done, 10.0) and future.result().success
-        shape = problems.get("sloper").prior
         stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
-        prior.publish(convert.shape_to_msg(shape, stamp))
         history.publish(convert.history_to_msg(History(), stamp))
         pose.publish(_pose(0.0, 0.6, 0.45))
         empty = np.zeros((0, shape.n_vertices, 2))

@@ -1,21 +1,11 @@
 """Every node's parameters load from the config files; bad values stop the node with a reason."""
 
-import importlib.util
+import importlib
 
 import pytest
 import yaml
 from conftest import REPO_ROOT
 from node_helpers import launch_nodes, node_from_launch
-
-# Nodes whose core library may not be merged yet: skipped (with the reason) until it is.
-CORE_OF = {"inference_node": "tactile_dock_ros.core.sampling",
-           "planner_node": "tactile_dock_ros.core.planner"}  # fmt: skip
-
-
-def _skip_without_core(executable: str) -> None:
-    module = CORE_OF.get(executable)
-    if module and importlib.util.find_spec(module) is None:
-        pytest.skip(f"{module} is not in this tree yet")
 
 
 def _cases():
@@ -26,10 +16,6 @@ def _cases():
 
 @pytest.mark.parametrize(("profile", "name", "spec"), list(_cases()))
 def test_parameters_load_from_the_config_file(profile, name, spec, tmp_path):
-    _skip_without_core(spec.executable)
-    if spec.executable == "perception_node" and profile == "robot":
-        if importlib.util.find_spec("tactile_dock_ros.perception.depth") is None:
-            pytest.skip("prior_source: depth needs tactile_dock_ros.perception (not merged yet)")
     config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
     own = config.get(name, {}).get("ros__parameters", {})
     shared = config.get("/**", {}).get("ros__parameters", {})
@@ -58,6 +44,8 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("executor", "max_speed:=5.0", "max_speed"),
         ("executor", "workspace_min:=[0.0, 0.0, 0.0]", "workspace_min"),
         ("executor", "workspace_min:=[2.0, 2.0]", "workspace_min must be below"),
+        ("executor", "workspace_max:=[.inf, 1.0]", "workspace_max: .* is not finite"),
+        ("executor", "wrench_frame:=sensor", "wrench_frame"),
         ("mock_hardware", "rate_hz:=0.0", "rate_hz"),
         ("mock_hardware", "stiffness:=500", "stiffness"),  # an integer where a float is due
         ("perception", "capture:=sometimes", "capture"),
@@ -76,3 +64,12 @@ def test_an_unknown_problem_stops_mock_hardware(tmp_path):
     spec = launch_nodes("mock", problem="everest")["mock_hardware"]
     with pytest.raises(ValueError, match="problem"), node_from_launch(spec, tmp_path):
         pass
+
+
+def test_parameters_are_read_only_at_run_time(tmp_path):
+    """The nodes read parameters once: a run-time change is refused, not silently ignored."""
+    from rclpy.parameter import Parameter
+
+    with node_from_launch(launch_nodes("mock")["executor"], tmp_path) as (node, _):
+        result = node.set_parameters([Parameter("max_force", value=5.0)])[0]
+        assert not result.successful and node.get_parameter("max_force").value == 40.0

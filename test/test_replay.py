@@ -35,7 +35,7 @@ def _header(ns: int) -> Header:
     return header
 
 
-def _record_episode(rng, messages: list, t0: int) -> None:
+def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
     """CYCLES plans on a sloper truth, as the nodes publish them (every plan resent)."""
     problem = problems.get("sloper")
     truth = problem.sample_ground_truth(np.random.default_rng(5))
@@ -77,6 +77,7 @@ def _record_episode(rng, messages: list, t0: int) -> None:
             result.target_edge,
             result.reason,
             result.target_point,
+            episode,
         )
         plan_msg = convert.plan_to_msg(command, _header(next(clock)))
         for _ in range(RESENDS):
@@ -99,7 +100,7 @@ def _record_episode(rng, messages: list, t0: int) -> None:
             if run.contact
             else ExecutionReport.NO_CONTACT
         )
-        report = convert.Report(plan_id, outcome, run.observations, run.stop_point, "")
+        report = convert.Report(plan_id, outcome, run.observations, run.stop_point, "", episode)
         put("/execution_report", convert.report_to_msg, report)
         history = history.extend(run.observations.a, run.observations.b, run.observations.status)
         targets.append(result.target_point)
@@ -110,8 +111,8 @@ def _record_episode(rng, messages: list, t0: int) -> None:
 def recorded(tmp_path_factory):
     """A bag with two episodes of CYCLES recorded plans each."""
     messages, rng = [], np.random.default_rng(0)
-    _record_episode(rng, messages, 0)
-    _record_episode(rng, messages, 10**9)
+    _record_episode(rng, messages, 0, 1795315710)
+    _record_episode(rng, messages, 10**9, 1795316710)
     path = tmp_path_factory.mktemp("bags") / "episode"
     assert bag.write(path, messages) == len(messages)
     return path
@@ -133,10 +134,11 @@ def test_every_episode_message_survives_a_bag_round_trip(tmp_path):
 def test_replay_reproduces_every_recorded_plan(recorded, tmp_path, capsys):
     cycles = replay.load_cycles(recorded)
     assert len(cycles) == 2 * CYCLES  # resent copies are one plan; two episodes
-    assert [c.episode for c in cycles] == [1] * CYCLES + [2] * CYCLES
+    assert [c.episode for c in cycles] == [1795315710] * CYCLES + [1795316710] * CYCLES
     first, second = cycles[0], cycles[1]
     assert len(first.previous_targets) == 0 and len(cycles[CYCLES].previous_targets) == 0
     if first.recorded.dock:  # eq. (24) novelty: the next cycle knows the earlier aim point
+        assert first.outcome in ("DOCKED", "CONTACT_FAILED", "NO_CONTACT")  # its report
         np.testing.assert_array_equal(second.previous_targets[0], first.recorded.target_point)
     rows = [replay.compare(c, replay.replan(c, DEFAULTS)) for c in cycles]
     assert all(r["same"] for r in rows), rows

@@ -33,6 +33,16 @@ def header(node: Node, frame_id: str) -> Header:
     return Header(stamp=node.get_clock().now().to_msg(), frame_id=frame_id)
 
 
+def now_seconds(node: Node) -> float:
+    """The node clock in seconds (ROS time when use_sim_time is set)."""
+    return node.get_clock().now().nanoseconds * 1e-9
+
+
+def stamp_seconds(stamp) -> float:
+    """builtin_interfaces/Time -> seconds."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
 def guarded(node: Node, what: str, callback: Callable) -> Callable:
     """Wrap a subscription callback: a MessageError is logged and the message dropped."""
 

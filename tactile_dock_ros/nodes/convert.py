@@ -14,7 +14,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from geometry_msgs.msg import Point, Vector3
+from geometry_msgs.msg import (
+    Point,
+    PoseStamped,
+    Twist,
+    TwistStamped,
+    Vector3,
+    Wrench,
+    WrenchStamped,
+)
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
@@ -96,16 +105,52 @@ class PlaneFrame:
         return np.asarray(v2, float) @ self.axes
 
 
+def check_frame(what: str, msg, frame_id: str) -> None:
+    """Reject a stamped message in another frame than ``frame_id`` (tf2 is not used here: the
+    publisher must express it there). An empty frame_id is taken to mean ``frame_id``."""
+    if msg.header.frame_id and msg.header.frame_id != frame_id:
+        raise MessageError(f"{what} is in frame {msg.header.frame_id!r}, expected {frame_id!r}")
+
+
 def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
-    """geometry_msgs/PoseStamped -> tool position in the plane (2,) metres."""
+    """geometry_msgs/PoseStamped (base frame) -> tool position in the plane (2,) metres."""
     p = msg.pose.position
     return plane.point_to_plane(_finite("pose.position", [p.x, p.y, p.z]))
 
 
-def wrench_force(msg, plane: PlaneFrame) -> np.ndarray:
-    """geometry_msgs/WrenchStamped -> force in the plane (2,) newtons (torque is not used)."""
+def pose_rotation(msg) -> np.ndarray:
+    """geometry_msgs/PoseStamped -> (3, 3) rotation of the tool frame into the pose's frame."""
+    q = msg.pose.orientation
+    xyzw = _finite("pose.orientation", [q.x, q.y, q.z, q.w])
+    if abs(np.linalg.norm(xyzw) - 1.0) > 1e-3:
+        raise MessageError(f"pose.orientation must be a unit quaternion, got {xyzw.tolist()}")
+    return Rotation.from_quat(xyzw).as_matrix()
+
+
+def wrench_force(msg) -> np.ndarray:
+    """geometry_msgs/WrenchStamped -> force (3,) newtons in the message's frame (no torque)."""
     f = msg.wrench.force
-    return plane.vector_to_plane(_finite("wrench.force", [f.x, f.y, f.z]))
+    return _finite("wrench.force", [f.x, f.y, f.z])
+
+
+def pose_to_msg(position_3: np.ndarray, header: Header) -> PoseStamped:
+    """Position (3,) metres with identity orientation (the mock tool does not rotate)."""
+    msg = PoseStamped(header=header)
+    msg.pose.position = Point(
+        x=float(position_3[0]), y=float(position_3[1]), z=float(position_3[2])
+    )
+    msg.pose.orientation.w = 1.0
+    return msg
+
+
+def wrench_to_msg(force_3: np.ndarray, header: Header) -> WrenchStamped:
+    """Force (3,) newtons, zero torque."""
+    return WrenchStamped(header=header, wrench=Wrench(force=vector3(force_3)))
+
+
+def twist_to_msg(velocity_3: np.ndarray, header: Header) -> TwistStamped:
+    """Linear velocity (3,) m/s, zero angular velocity."""
+    return TwistStamped(header=header, twist=Twist(linear=vector3(velocity_3)))
 
 
 def twist_velocity(msg, plane: PlaneFrame) -> np.ndarray:
@@ -236,11 +281,13 @@ class PlanCommand:
     target_edge: int
     reason: str
     target_point: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # (2,) metres
+    episode: int = 0
 
 
 def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
     return DockingPlan(
         header=header,
+        episode=int(command.episode),
         plan_id=int(command.plan_id),
         decision=DockingPlan.DOCK if command.dock else DockingPlan.GIVE_UP,
         waypoints=[_point(w) for w in command.waypoints],
@@ -257,8 +304,9 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
 
 
 def plan_from_msg(msg: DockingPlan) -> PlanCommand:
-    """DockingPlan -> PlanCommand. A DOCK plan needs >= 2 distinct waypoints, a unit load,
-    positive force threshold and speed; a GIVE_UP plan may have no waypoints."""
+    """DockingPlan -> PlanCommand. A DOCK plan needs >= 2 distinct waypoints, a unit load along
+    its last (loading) move, positive force threshold and speed; a GIVE_UP plan may have no
+    waypoints."""
     if msg.decision not in (DockingPlan.DOCK, DockingPlan.GIVE_UP):
         raise MessageError(f"unknown decision {msg.decision}")
     dock = msg.decision == DockingPlan.DOCK
@@ -274,6 +322,12 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
             raise MessageError("the loading move (last waypoint pair) has zero length")
         if abs(np.linalg.norm(load) - 1.0) > UNIT_TOLERANCE:
             raise MessageError(f"load_direction must be a unit vector, got {load}")
+        move = waypoints[-1] - waypoints[-2]
+        if move @ load < (1.0 - UNIT_TOLERANCE) * np.linalg.norm(move):
+            raise MessageError(
+                f"the loading move {move.tolist()} does not point along load_direction "
+                f"{load.tolist()} (the executor pushes along the last waypoint pair)"
+            )
         if scalars[0] <= 0 or scalars[1] <= 0:
             raise MessageError("contact_force_threshold and max_speed must be > 0")
     return PlanCommand(
@@ -289,6 +343,7 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
         target_edge=int(msg.target_edge),
         reason=msg.reason,
         target_point=np.array([msg.target_point.x, msg.target_point.y], float),
+        episode=int(msg.episode),
     )
 
 
@@ -311,6 +366,7 @@ class Report:
     history: History
     stop_point: np.ndarray
     detail: str
+    episode: int = 0
 
     @property
     def outcome_name(self) -> str:
@@ -320,6 +376,7 @@ class Report:
 def report_to_msg(report: Report, header: Header) -> ExecutionReport:
     return ExecutionReport(
         header=header,
+        episode=int(report.episode),
         plan_id=int(report.plan_id),
         outcome=int(report.outcome),
         segments=segments_to_msgs(report.history, header, report.plan_id),
@@ -337,6 +394,7 @@ def report_from_msg(msg: ExecutionReport) -> Report:
         history=history_from_segments(msg.segments),
         stop_point=_points("stop_point", [msg.stop_point])[0],
         detail=msg.detail,
+        episode=int(msg.episode),
     )
 
 

@@ -1,21 +1,33 @@
 """executor: runs DockingPlans on the arm as guarded moves and reports what it felt.
 
-Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped,
-F/T sensor); publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a
-plan runs, and ``execution_report`` (ExecutionReport) when it ends. The state machine and the
+Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wrench``
+(WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
+planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped);
+publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
+``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends. Messages in
+an unexpected frame are dropped with an error (tf2 is not used). The safety limit on force is
+checked on the whole 3-D force, out-of-plane pushes included. The state machine and the other
 safety checks are in ``nodes.guarded``; this file is the ROS glue.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
-from tactile_dock_ros.nodes.common import PLANE_TABLE, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.common import (
+    PLANE_TABLE,
+    guarded,
+    header,
+    now_seconds,
+    plane_frame,
+    run,
+)
 from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
 
@@ -46,6 +58,13 @@ PARAMS = [
     ),
     Param("max_slide", 0.3, "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
     Param("approach_gain", 4.0, "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
+    Param(
+        "wrench_frame",
+        "base",
+        "frame of the wrench: base = base_frame_id; tool = the F/T sensor's frame, aligned with "
+        "the tool_pose orientation (rotated into the base frame with it)",
+        choices=("base", "tool"),
+    ),
     Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
 ]
@@ -79,6 +98,7 @@ class ExecutorNode(Node):
         self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)
         self.dt = 1.0 / self.p.control_rate_hz
         self.tool: np.ndarray | None = None
+        self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
         self.pose_time = self.wrench_time = None
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
@@ -94,19 +114,30 @@ class ExecutorNode(Node):
         self.create_subscription(
             WrenchStamped, "wrench", guarded(self, "wrench", self.on_wrench), qos.SENSOR
         )
+        self.create_subscription(
+            DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED
+        )
         self.create_timer(self.dt, self.on_tick)
 
-    def now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     def on_pose(self, msg: PoseStamped) -> None:
+        convert.check_frame("tool pose", msg, self.p.base_frame_id)
         self.tool = convert.pose_position(msg, self.plane)
-        self.pose_time = self.now()
+        self.tool_rotation = convert.pose_rotation(msg)
+        self.pose_time = now_seconds(self)
 
     def on_wrench(self, msg: WrenchStamped) -> None:
-        force = convert.wrench_force(msg, self.plane)
-        self.wrench_time = self.now()
+        """Filter the force in the frame it comes in (the sensor bias is constant there)."""
+        if self.p.wrench_frame == "base":
+            convert.check_frame("wrench", msg, self.p.base_frame_id)
+        force = convert.wrench_force(msg)
+        self.wrench_time = now_seconds(self)
         self.filter.add(self.wrench_time, force)
+
+    def base_force(self) -> np.ndarray:
+        """Bias-free filtered force (3,) newtons in the base frame."""
+        if self.p.wrench_frame == "tool":
+            return self.tool_rotation @ self.filter.value
+        return self.filter.value
 
     def on_plan(self, msg: DockingPlan) -> None:
         key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -118,18 +149,33 @@ class ExecutorNode(Node):
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
         if self.run is not None or self.pending is not None:
-            self.report(plan.plan_id, Outcome.ABORTED, "refused: another plan is running")
+            self.report(plan, Outcome.ABORTED, "refused: another plan is running")
             return
-        self.pending = (plan, self.now())
+        self.pending = (plan, now_seconds(self))
         self.get_logger().info(
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )
+
+    def on_episode_status(self, msg: DiagnosticStatus) -> None:
+        """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
+        state = msg.message.split(":")[0]
+        episode = int({kv.key: kv.value for kv in msg.values}.get("episode", "0"))
+        plan = self.run.plan if self.run is not None else (self.pending or (None,))[0]
+        if plan is None or (plan.episode == episode and state == "RUNNING"):
+            return
+        why = f"episode {episode} is {state}" if plan.episode == episode else "a new episode began"
+        if self.run is not None:
+            if not self.run.done:  # on_tick stops the arm and reports
+                self.run.abort(f"stopped: {why}", self.tool)
+        else:
+            self.pending = None
+            self.report(plan, Outcome.ABORTED, f"stopped before starting: {why}")
 
     def start_pending(self) -> None:
         """Start the received plan once pose and wrench flow: fresh (within sensor_timeout) if
         they ever arrived, else waiting up to connect_timeout for the first ones (discovery)."""
         plan, received = self.pending
-        now = self.now()
+        now = now_seconds(self)
         stamps = (self.pose_time, self.wrench_time)
         if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):
             self.pending = None
@@ -142,7 +188,7 @@ class ExecutorNode(Node):
             missing = [n for n, s in zip(("tool pose", "wrench"), stamps, strict=True) if s is None]
             why = f"no {' or '.join(missing)} received" if missing else "sensor data too old"
             self.command(np.zeros(2))
-            self.report(plan.plan_id, Outcome.ABORTED, f"sensor timeout: {why}")
+            self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
 
     def on_tick(self) -> None:
         if self.pending is not None:
@@ -150,7 +196,7 @@ class ExecutorNode(Node):
         run = self.run
         if run is None:
             return
-        t = self.now()
+        t = now_seconds(self)
         stamps = [s for s in (self.pose_time, self.wrench_time) if s is not None]
         age = t - min(stamps) if len(stamps) == 2 else t - run.t_start
         velocity = np.zeros(2)
@@ -158,12 +204,16 @@ class ExecutorNode(Node):
             if age > self.limits.sensor_timeout:
                 run.abort(f"sensor timeout: no F/T data for {age:.2f} s", self.tool)
         elif not run.done:
-            velocity = run.step(t, self.tool, self.filter.value, age)
-            velocity = run.check_next(self.tool, velocity, self.dt)
+            force = self.base_force()
+            if np.linalg.norm(force) > self.limits.max_force:  # out-of-plane force counts too
+                run.abort(f"force {np.linalg.norm(force):.1f} N (3-D) above the limit", self.tool)
+            else:
+                velocity = run.step(t, self.tool, self.plane.vector_to_plane(force), age)
+                velocity = run.check_next(self.tool, velocity, self.dt)
         self.command(velocity)
         if run.done:
             self.run = None
-            self.report(run.plan.plan_id, run.outcome, run.detail, run.history, run.stop_point)
+            self.report(run.plan, run.outcome, run.detail, run.history, run.stop_point)
             self.get_logger().info(
                 f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
                 f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
@@ -171,15 +221,14 @@ class ExecutorNode(Node):
             )
 
     def command(self, velocity: np.ndarray) -> None:
-        msg = TwistStamped(header=header(self, self.p.base_frame_id))
         v3 = self.plane.vector_from_plane(velocity)
-        msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(x) for x in v3)
-        self.cmd_pub.publish(msg)
+        self.cmd_pub.publish(convert.twist_to_msg(v3, header(self, self.p.base_frame_id)))
 
-    def report(self, plan_id, outcome, detail, history=None, stop_point=None) -> None:
+    def report(self, plan, outcome, detail, history=None, stop_point=None) -> None:
         stop = self.tool if stop_point is None else stop_point
         report = convert.Report(
-            plan_id=plan_id,
+            episode=plan.episode,
+            plan_id=plan.plan_id,
             outcome=outcome.value,
             history=History() if history is None else history,
             stop_point=np.zeros(2) if stop is None else stop,
@@ -187,7 +236,7 @@ class ExecutorNode(Node):
         )
         self.report_pub.publish(convert.report_to_msg(report, header(self, self.p.plane_frame_id)))
         if outcome is Outcome.ABORTED:
-            self.get_logger().warning(f"plan {plan_id}: ABORTED: {detail}")
+            self.get_logger().warning(f"plan {plan.plan_id}: ABORTED: {detail}")
 
 
 def main(args: list[str] | None = None) -> int:

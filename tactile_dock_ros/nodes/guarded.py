@@ -311,7 +311,7 @@ class GuardedRun:
 
 
 class ForceFilter:
-    """F/T bias removal and first-order low-pass filtering of the plane force (newtons).
+    """F/T bias removal and first-order low-pass filtering of a force vector (newtons).
 
     The bias is the mean of the first ``bias_samples`` readings after :meth:`reset` (the
     executor resets at the start of every plan, with the tool at rest in free space). After
@@ -326,9 +326,9 @@ class ForceFilter:
         self.reset()
 
     def reset(self) -> None:
-        self._bias_sum, self._count = np.zeros(2), 0
+        self._bias_sum, self._count = 0.0, 0
         self.bias = None
-        self.value = np.zeros(2)
+        self.value = None  # an array shaped like the readings once the bias is known
         self._last_t = None
 
     @property
@@ -342,6 +342,7 @@ class ForceFilter:
             self._count += 1
             if self._count == self.bias_samples:
                 self.bias = self._bias_sum / self._count
+                self.value = np.zeros_like(self.bias)
             self._last_t = t
             return
         dt = max(t - self._last_t, 0.0)

@@ -1,7 +1,8 @@
 """inference: the contact history and posterior shape samples (paper Sec. IV).
 
-Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` and ``episode``
-(std_msgs/UInt32, latched: the planner's episode id; a new id empties the history). Keeps the
+Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of
+the current episode count) and ``episode`` (std_msgs/UInt32, latched: the planner's episode id;
+a new id empties the history). Keeps the
 history, publishes it latched on ``contact_history`` and, after every change while an episode
 runs, samples the posterior with ``core.sampling.sample_posterior`` and publishes
 ``shape_samples`` (latched) and RViz markers on ``~/markers``.
@@ -73,6 +74,12 @@ class InferenceNode(Node):
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
+        if report.episode != self.episode:
+            self.get_logger().warning(
+                f"plan {report.plan_id} of episode {report.episode}: report ignored (the current "
+                f"episode is {self.episode})"
+            )
+            return
         if report.plan_id in self.handled_plans:
             self.get_logger().warning(f"plan {report.plan_id}: duplicate report ignored")
             return

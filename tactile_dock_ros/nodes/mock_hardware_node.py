@@ -27,7 +27,14 @@ from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
-from tactile_dock_ros.nodes.common import PLANE_TABLE, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.common import (
+    PLANE_TABLE,
+    guarded,
+    header,
+    now_seconds,
+    plane_frame,
+    run,
+)
 from tactile_dock_ros.nodes.mock_physics import PointToolSim
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
@@ -141,33 +148,25 @@ class MockHardwareNode(Node):
 
         self.create_timer(1.0 / self.p.camera_rate_hz, publish)
 
-    def now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     def on_command(self, msg: TwistStamped) -> None:
         self.velocity = convert.twist_velocity(msg, self.plane)
-        self.command_time = self.now()
+        self.command_time = now_seconds(self)
 
     def on_tick(self) -> None:
         fresh = self.command_time is not None
-        fresh = fresh and self.now() - self.command_time <= self.p.command_timeout
+        fresh = fresh and now_seconds(self) - self.command_time <= self.p.command_timeout
         self.sim.step(self.velocity if fresh else np.zeros(2), self.dt)
         stamp = header(self, self.p.base_frame_id)
         position = self.plane.point_from_plane(self.sim.tool) + self.rng.normal(
             0.0, self.p.pose_noise, 3
         )
-        pose = PoseStamped(header=stamp)
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, position)
-        pose.pose.orientation.w = 1.0
         force = (
             self.plane.vector_from_plane(self.sim.force)
             + np.asarray(self.p.force_bias)
             + self.rng.normal(0.0, self.p.force_noise, 3)
         )
-        wrench = WrenchStamped(header=stamp)
-        wrench.wrench.force = convert.vector3(force)
-        self.pose_pub.publish(pose)
-        self.wrench_pub.publish(wrench)
+        self.pose_pub.publish(convert.pose_to_msg(position, stamp))
+        self.wrench_pub.publish(convert.wrench_to_msg(force, stamp))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -2,12 +2,15 @@
 
 Every parameter gets a ``ParameterDescriptor`` (description with its unit, and a numeric range
 where one applies), so ``ros2 param describe`` documents it; values are validated once at start
-(range, choices, list length) and logged with their units. A bad value raises ``ValueError``
-naming the parameter, which stops the node before it touches any hardware.
+(range, choices, list length, finite numbers) and logged with their units. A bad value raises
+``ValueError`` naming the parameter, which stops the node before it touches any hardware. Every
+parameter is read-only: the nodes read them once, so ``ros2 param set`` is refused rather than
+accepted and silently ignored (restart the node with new values).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -33,7 +36,7 @@ class Param:
         text = f"{self.description} [{self.unit}]" if self.unit else self.description
         if self.choices:
             text += f" (one of: {', '.join(self.choices)})"
-        descriptor = ParameterDescriptor(name=self.name, description=text)
+        descriptor = ParameterDescriptor(name=self.name, description=text, read_only=True)
         if self.low is not None and self.high is not None and not isinstance(self.default, list):
             if isinstance(self.default, bool):
                 pass
@@ -55,7 +58,9 @@ class Param:
             raise ValueError(f"parameter {self.name}: {value!r} is not one of {self.choices}")
         for v in values:
             if isinstance(v, int | float) and not isinstance(v, bool):
-                if v != v or (self.low is not None and v < self.low):
+                if not math.isfinite(v):
+                    raise ValueError(f"parameter {self.name}: {value} is not finite")
+                if self.low is not None and v < self.low:
                     raise ValueError(f"parameter {self.name}: {value} is below {self.low}")
                 if self.high is not None and v > self.high:
                     raise ValueError(f"parameter {self.name}: {value} is above {self.high}")

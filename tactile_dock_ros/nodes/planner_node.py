@@ -1,7 +1,10 @@
 """planner: docking plans from posterior samples (paper Sec. V-B), and the episode loop.
 
-An episode starts with the ``start_episode`` service (std_srvs/Trigger): the node publishes a
-new id on ``episode`` (latched), which empties inference's history. Each cycle it waits for
+An episode starts with the ``start_episode`` service (std_srvs/Trigger), refused while one runs
+or before a ``terrain_prior`` arrived: the node publishes a new id on ``episode`` (latched),
+which empties inference's history. The id is the node clock's milliseconds at the start, mod
+2^32, so a restarted planner never reuses one; plans carry it, and reports of other episodes
+(a late report, a restarted node) are ignored. Each cycle it waits for
 ``shape_samples`` conditioned on the whole current ``contact_history`` (stamped after the
 episode start) and the tool position (``tool_pose``), calls ``core.planner.plan`` and publishes
 a ``plan`` (DockingPlan). The executor's ``execution_report`` ends the cycle. The episode ends
@@ -29,7 +32,16 @@ from tactile_dock_ros.msg import (
     ShapeSamples,
 )
 from tactile_dock_ros.nodes import convert, qos
-from tactile_dock_ros.nodes.common import PLANE_TABLE, Stopwatch, guarded, header, plane_frame, run
+from tactile_dock_ros.nodes.common import (
+    PLANE_TABLE,
+    Stopwatch,
+    guarded,
+    header,
+    now_seconds,
+    plane_frame,
+    run,
+    stamp_seconds,
+)
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
@@ -90,6 +102,7 @@ class PlannerNode(Node):
         self.prior = convert.shape_from_msg(msg)
 
     def on_pose(self, msg: PoseStamped) -> None:
+        convert.check_frame("tool pose", msg, self.p.base_frame_id)
         self.tool = convert.pose_position(msg, self.plane)
         self.maybe_plan()
 
@@ -106,11 +119,17 @@ class PlannerNode(Node):
         if self.state == RUNNING:
             response.success, response.message = False, f"episode {self.episode} is running"
             return response
-        self.episode += 1
+        if self.prior is None:
+            response.success = False
+            response.message = "no terrain_prior yet (robot profile: call /perception/capture)"
+            self.get_logger().warning(f"start_episode refused: {response.message}")
+            return response
+        stamp_ms = (self.get_clock().now().nanoseconds // 1_000_000) % 2**32
+        self.episode = stamp_ms if stamp_ms not in (0, self.episode) else self.episode + 1
         self.state, self.cycles, self.targets = RUNNING, [], []
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
-        self.stage_start = self.seconds()
+        self.stage_start = now_seconds(self)
         self.episode_pub.publish(UInt32(data=self.episode))
         self.get_logger().info(f"episode {self.episode}: started")
         self.publish_status()
@@ -119,11 +138,12 @@ class PlannerNode(Node):
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
-        if self.state != RUNNING or report.plan_id != self.awaiting_plan:
+        current = report.episode == self.episode and report.plan_id == self.awaiting_plan
+        if self.state != RUNNING or not current:
             return
         cycle = self.cycles[-1]
         cycle["outcome"] = report.outcome_name
-        cycle["execution_s"] = _seconds(msg.header.stamp) - cycle["plan_stamp"]
+        cycle["execution_s"] = stamp_seconds(msg.header.stamp) - cycle["plan_stamp"]
         self.awaiting_plan = None
         self.get_logger().info(
             f"episode {self.episode} cycle {len(self.cycles)}: P_dock={cycle['p_dock']:.3f} "
@@ -136,14 +156,11 @@ class PlannerNode(Node):
         elif len(self.cycles) >= self.p.max_cycles:
             self.finish(GAVE_UP, f"cycle budget of {self.p.max_cycles} spent")
         else:
-            self.stage_start = self.seconds()
+            self.stage_start = now_seconds(self)
             self.publish_status()
             self.maybe_plan()
 
     # ------------------------------------------------------------------ planning
-
-    def seconds(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
 
     def on_timer(self) -> None:
         """Resend the plan being executed every second until its report arrives (an executor
@@ -151,10 +168,10 @@ class PlannerNode(Node):
         that waits longer than stage_timeout for samples or a report."""
         if self.state != RUNNING:
             return
-        if self.awaiting_plan is not None and self.seconds() - self.last_plan[1] >= 1.0:
+        if self.awaiting_plan is not None and now_seconds(self) - self.last_plan[1] >= 1.0:
             self.plan_pub.publish(self.last_plan[0])
-            self.last_plan = (self.last_plan[0], self.seconds())
-        if self.seconds() - self.stage_start <= self.p.stage_timeout:
+            self.last_plan = (self.last_plan[0], now_seconds(self))
+        if now_seconds(self) - self.stage_start <= self.p.stage_timeout:
             return
         waiting = "execution report" if self.awaiting_plan is not None else "posterior samples"
         self.finish(ABORTED, f"no {waiting} within {self.p.stage_timeout:.0f} s")
@@ -164,14 +181,14 @@ class PlannerNode(Node):
             return False
         msg, _ = self.samples
         fresh = Time.from_msg(msg.header.stamp) >= self.episode_start
-        planned = sum(len(c["history"]) for c in self.cycles[-1:])
+        last_planned_on = len(self.cycles[-1]["history"]) if self.cycles else -1
         return (
             fresh
             and self.prior is not None
             and self.tool is not None
             and self.history is not None
             and msg.history_length == len(self.history)
-            and (not self.cycles or msg.history_length > planned)
+            and msg.history_length > last_planned_on  # the last report's evidence is in
         )
 
     def maybe_plan(self) -> None:
@@ -207,6 +224,7 @@ class PlannerNode(Node):
             target_edge=result.target_edge if dock else -1,
             reason=result.reason,
             target_point=result.target_point,
+            episode=self.episode,
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
         self.cycles.append(
@@ -215,7 +233,7 @@ class PlannerNode(Node):
                 "p_dock": float(result.p_dock),
                 "inference_s": float(msg.compute_time),
                 "planning_s": watch.seconds,
-                "plan_stamp": _seconds(out.header.stamp),
+                "plan_stamp": stamp_seconds(out.header.stamp),
                 "outcome": "",
             }
         )
@@ -228,8 +246,8 @@ class PlannerNode(Node):
             self.finish(GAVE_UP, result.reason)
             return
         self.awaiting_plan = command.plan_id
-        self.stage_start = self.seconds()
-        self.last_plan = (out, self.seconds())
+        self.stage_start = now_seconds(self)
+        self.last_plan = (out, now_seconds(self))
         self.targets.append(np.asarray(result.target_point, float))  # eq. (24) novelty
         self.publish_status()
 
@@ -272,10 +290,6 @@ class PlannerNode(Node):
                 values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
             )
         )
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
 
 
 def main(args: list[str] | None = None) -> int:

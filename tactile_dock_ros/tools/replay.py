@@ -43,7 +43,7 @@ PATH_TOLERANCE_M = 1e-9  # replayed and recorded paths "agree" below this
 class Cycle:
     """What the planner node had when it published one recorded plan."""
 
-    episode: int  # 1-based, counted in the bag
+    episode: int  # the planner's episode id
     prior: GaussianShape
     history: History
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
@@ -76,7 +76,7 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
     samples: dict[int, np.ndarray] = {}  # history length -> newest samples
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
     seen, targets, pending = set(), [], []
-    episode = 0
+    episode = None
     for topic, _, msg in bag.read(path):
         if topic == "/terrain_prior":
             prior = convert.shape_from_msg(msg)
@@ -85,15 +85,16 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
         elif topic == "/shape_samples" and msg.num_samples > 0:
             samples[int(msg.history_length)] = convert.samples_from_msg(msg)
         elif topic == "/execution_report":
-            reports[(episode, int(msg.plan_id))] = convert.report_from_msg(msg).outcome_name
+            report = convert.report_from_msg(msg)
+            reports[(report.episode, report.plan_id)] = report.outcome_name
         elif topic == "/plan":
             key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
             if key in seen:
                 continue  # the planner resends a plan until its report arrives
             seen.add(key)
             command = convert.plan_from_msg(msg)
-            if command.plan_id == 1:
-                episode, targets = episode + 1, []
+            if command.episode != episode:
+                episode, targets = command.episode, []
             if prior is None or history is None or len(history) not in samples:
                 log(
                     f"episode {episode} plan {command.plan_id}: skipped, its prior, history or "
