@@ -1,8 +1,10 @@
-"""`pip install .` gives the ROS-free library and its tools (no rclpy, no messages).
+"""`pip install .` gives the ROS-free library (no rclpy, no messages).
 
 The ROS 2 package itself is built by CMakeLists.txt (colcon / ament_cmake): that build generates
 the messages and installs everything, nodes included. This file serves users who want the method
-(core, perception, benchmarks) in a plain Python environment, e.g. for offline analysis.
+(core, perception) and its ROS-free tools (bench sampling / probsim / docking / perception, plot,
+calibrate) in a plain Python environment, e.g. for offline analysis. The ROS tools in the same
+folder (demo, episode, bag, replay, bench episode) need a ROS 2 environment.
 """
 
 from setuptools import setup
@@ -19,9 +21,10 @@ setup(
         "tactile_dock_ros.perception",
         "tactile_dock_ros.tools",
     ],
-    install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0"],
+    install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0", "pyyaml>=6.0"],
     extras_require={
         "perception": ["opencv-contrib-python-headless>=4.9", "open3d-cpu>=0.19"],
         "plot": ["matplotlib>=3.8"],
+        "bench": ["tmg-hmc>=1.0.4"],
     },
 )

@@ -4,14 +4,14 @@ Set at import time so that every process a test starts inherits the same isolate
 """
 
 import os
-import random
 from pathlib import Path
+
+from tactile_dock_ros.tools.bringup import isolate_dds
 
 TEST_DIR = Path(__file__).resolve().parent
 REPO_ROOT = TEST_DIR.parent
 
-os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(100, 200))
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+isolate_dds()
 os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(TEST_DIR / "fastdds_profile.xml")
 # Child processes import the work-tree sources first, like pytest itself does.
 os.environ["PYTHONPATH"] = os.pathsep.join(

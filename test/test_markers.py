@@ -6,6 +6,7 @@ from visualization_msgs.msg import Marker
 
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.nodes import markers
+from tactile_dock_ros.tools.figures import STATUS_RGBA
 
 
 def test_samples_and_history_markers():
@@ -18,5 +19,5 @@ def test_samples_and_history_markers():
     assert [len(m.points) for m in strips] == [5, 5, 5, 2, 2]
     assert strips[0].points[2].x == samples[0, 2, 0]
     slip = strips[-1].color
-    assert (slip.r, slip.g, slip.b) == markers.STATUS_RGBA[Status.SLIP_LEFT][:3]
+    assert (slip.r, slip.g, slip.b) == STATUS_RGBA[Status.SLIP_LEFT][:3]
     assert len({m.id for m in strips if m.ns == "samples"}) == 3

@@ -70,3 +70,10 @@ def test_calibrate_cli_writes_the_config_section(tmp_path):
     np.testing.assert_allclose(config.extrinsic.T_plane_camera, T_PLANE_CAMERA, atol=0.01)
     cv2.imwrite(str(tmp_path / "blank.png"), np.full((480, 640), 200, np.uint8))
     assert calibrate.main([str(tmp_path / "blank.png"), *argv[1:]]) == 1  # no board: exit 1
+    for bad_pose in ("{}", "T_plane_board: [[1, 0], [0, 1]]", "T_plane_board: [[1, 2], [3]]"):
+        (tmp_path / "bad.yaml").write_text(bad_pose)
+        bad = [*argv[:-3], str(tmp_path / "bad.yaml"), "--out", str(out)]
+        with pytest.raises(SystemExit):  # argparse error naming the file, no traceback
+            calibrate.main(bad)
+    (tmp_path / "empty.yaml").write_text("")
+    assert calibrate.main([*argv[:-1], str(tmp_path / "empty.yaml")]) == 0  # empty: new config

@@ -259,7 +259,7 @@ def test_garbage_depth_gives_a_prior_or_a_perception_error(seed, invalid):
 def test_shipped_config_runs_the_pipeline():
     from conftest import REPO_ROOT
 
-    config = PerceptionConfig.load(REPO_ROOT / "config" / "perception.yaml")
+    config = PerceptionConfig.load(REPO_ROOT / "config" / "perception_example.yaml")
     np.testing.assert_allclose(config.extrinsic.T_plane_camera, T_NOMINAL, atol=1e-5)
     result = _run(scenes.ledges(), config, seed=2)
     assert len(result.slice.stretches) == 2

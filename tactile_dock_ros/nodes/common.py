@@ -15,8 +15,9 @@ from tactile_dock_ros.nodes.convert import MessageError, PlaneFrame
 from tactile_dock_ros.nodes.params import Param
 
 # The docking plane in the arm base frame (tf2 is not available everywhere; design.md).
+PLANE_FRAME_ID = Param("plane_frame_id", "dock_plane", "frame id stamped on plane-frame messages")
 PLANE_TABLE = [
-    Param("plane_frame_id", "dock_plane", "frame id stamped on plane-frame messages"),
+    PLANE_FRAME_ID,
     Param("base_frame_id", "base_link", "arm base frame of poses, wrenches and commands"),
     Param("plane_origin", [0.0, 0.0, 0.0], "plane origin in the base frame", "m", length=3),
     Param("plane_x_axis", [1.0, 0.0, 0.0], "plane x axis in the base frame", "unit", length=3),

@@ -8,15 +8,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from tactile_dock_ros.core.history import History, Status
-
-# Colours per contact status: free grey, collide orange, stick green, slips red / magenta.
-STATUS_RGBA = {
-    Status.FREE: (0.6, 0.6, 0.6, 1.0),
-    Status.COLLIDE: (1.0, 0.5, 0.0, 1.0),
-    Status.STICK: (0.0, 0.8, 0.0, 1.0),
-    Status.SLIP_LEFT: (0.9, 0.0, 0.0, 1.0),
-    Status.SLIP_RIGHT: (0.8, 0.0, 0.8, 1.0),
-}
+from tactile_dock_ros.tools.figures import STATUS_RGBA
 
 
 def _strip(header: Header, ns: str, index: int, points, rgba, width: float = 0.003) -> Marker:

@@ -24,13 +24,13 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, markers, qos
-from tactile_dock_ros.nodes.common import PLANE_TABLE, Stopwatch, guarded, header, run
+from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, Stopwatch, guarded, header, run
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.terrain_prior import perceive
 
 PARAMS = [
-    *PLANE_TABLE,
+    PLANE_FRAME_ID,  # the plane itself comes from perception_config (T_plane_camera)
     Param("prior_source", "depth", "where the prior comes from", choices=("depth", "problem")),
     Param(
         "problem",

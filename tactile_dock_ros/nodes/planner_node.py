@@ -10,7 +10,8 @@ episode start) and the tool position (``tool_pose``), calls ``core.planner.plan`
 a ``plan`` (DockingPlan). The executor's ``execution_report`` ends the cycle. The episode ends
 DOCKED (a report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without
 docking) or ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/
-DiagnosticStatus, latched) carries the state and the per-cycle latencies.
+DiagnosticStatus, latched) carries the state, the prior's vertex count (0: none yet) and the
+per-cycle latencies.
 """
 
 from __future__ import annotations
@@ -99,7 +100,10 @@ class PlannerNode(Node):
     # ------------------------------------------------------------------ inputs
 
     def on_prior(self, msg: ShapeDistribution) -> None:
+        first = self.prior is None
         self.prior = convert.shape_from_msg(msg)
+        if first:
+            self.publish_status()  # tells clients that start_episode will be accepted
 
     def on_pose(self, msg: PoseStamped) -> None:
         convert.check_frame("tool pose", msg, self.p.base_frame_id)
@@ -273,7 +277,11 @@ class PlannerNode(Node):
         self.publish_status(why)
 
     def publish_status(self, message: str = "") -> None:
-        values = {"episode": self.episode, "cycles": len(self.cycles)}
+        values = {
+            "episode": self.episode,
+            "cycles": len(self.cycles),
+            "prior_vertices": 0 if self.prior is None else self.prior.n_vertices,
+        }
         for i, cycle in enumerate(self.cycles, start=1):
             for key in ("p_dock", "inference_s", "planning_s", "execution_s", "outcome"):
                 if key in cycle:

@@ -8,12 +8,12 @@ execution latencies. Medians over repetitions; the machine may be shared, say so
 
 from __future__ import annotations
 
-import os
-import random
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from tactile_dock_ros.tools import bringup
 
 
 def add_arguments(parser) -> None:
@@ -27,7 +27,7 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    from tactile_dock_ros.tools import bringup, episode
+    from tactile_dock_ros.tools import episode
 
     arguments = {"profile": "mock", "problem": problem, "seed": str(seed),
                  "prior_source": prior_source}  # fmt: skip
@@ -63,8 +63,7 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
 def run(args) -> dict:
     episodes = []
     for r in range(args.repeats):
-        os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(100, 200))
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        bringup.isolate_dds()
         result = _one(args.problem, args.seed + r, args.prior_source, args.timeout)
         print(
             f"seed {result['seed']}: {result['state']} in {result['cycles']} cycles, "

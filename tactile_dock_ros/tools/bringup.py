@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -19,6 +20,17 @@ from tactile_dock_ros.tools import launch_xml
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # source tree: launch/, config/, scripts/
 LAUNCH_FILE = PACKAGE_ROOT / "launch" / "tactile_dock.launch.xml"
+
+
+def isolate_dds(keep_domain: bool = False) -> None:
+    """Put this process and those it starts on a random DDS domain (100-200), discovering peers
+    on this machine only: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` (Iron and later) and, on Humble,
+    ``ROS_LOCALHOST_ONLY``. ``keep_domain`` keeps a ``ROS_DOMAIN_ID`` the caller already set."""
+    if not (keep_domain and "ROS_DOMAIN_ID" in os.environ):
+        os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(100, 200))
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    if os.environ.get("ROS_DISTRO") == "humble":
+        os.environ["ROS_LOCALHOST_ONLY"] = "1"
 
 
 def nodes(arguments: dict[str, str]) -> list[launch_xml.NodeLaunch]:

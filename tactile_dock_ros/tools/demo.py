@@ -13,8 +13,6 @@ for ``python -m tactile_dock_ros.tools.replay DIR``.
 from __future__ import annotations
 
 import argparse
-import os
-import random
 import sys
 import tempfile
 from pathlib import Path
@@ -32,14 +30,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.bag is not None and args.bag.exists():
         parser.error(f"--bag {args.bag} exists; rosbag2 never overwrites a bag")
-    # An isolated DDS domain unless the caller chose one.
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(100, 200)))
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    from tactile_dock_ros.tools import bringup
+
+    bringup.isolate_dds(keep_domain=True)  # before rclpy loads
 
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from tactile_dock_ros.tools import bringup, episode
+    from tactile_dock_ros.tools import episode
 
     log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="tactile_dock_demo_"))
     arguments = {

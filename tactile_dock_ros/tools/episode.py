@@ -141,6 +141,7 @@ class EpisodeClient(Node):
             executor,
             lambda: (
                 self.record.prior is not None
+                and self.record.values.get("prior_vertices", "0") != "0"  # the planner has it
                 and self.start_client.service_is_ready()
                 and self.count_publishers("plan") > 0
                 and self.count_publishers("execution_report") > 0

@@ -1,6 +1,7 @@
 """Matplotlib drawing shared by the episode figures (tools.plot, tools.episode, tools.replay).
 
-One colour per observation status, the same as the RViz markers (``nodes.markers``).
+``STATUS_RGBA`` is the one colour table per observation status, also used by the RViz markers
+(``nodes.markers``), so a figure and RViz show a history alike.
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ import numpy as np
 
 from ..core.history import History, Status
 
-STATUS_COLOURS = {
-    Status.FREE: "tab:green",
-    Status.COLLIDE: "tab:red",
-    Status.STICK: "tab:purple",
-    Status.SLIP_LEFT: "tab:orange",
-    Status.SLIP_RIGHT: "gold",
+STATUS_RGBA = {  # free green, collide red, stick purple, slip left orange, slip right gold
+    Status.FREE: (0.17, 0.63, 0.17, 1.0),
+    Status.COLLIDE: (0.84, 0.15, 0.16, 1.0),
+    Status.STICK: (0.58, 0.40, 0.74, 1.0),
+    Status.SLIP_LEFT: (1.0, 0.50, 0.05, 1.0),
+    Status.SLIP_RIGHT: (1.0, 0.84, 0.0, 1.0),
 }
 
 
@@ -39,7 +40,7 @@ def outline(ax, vertices: np.ndarray, closed: bool, *fmt: str, **style) -> None:
 def history(ax, observed: History, width: float = 2.5) -> None:
     """Observation segments coloured by status."""
     for a, b, s in zip(observed.a, observed.b, observed.status, strict=True):
-        ax.plot([a[0], b[0]], [a[1], b[1]], color=STATUS_COLOURS[Status(s)], lw=width)
+        ax.plot([a[0], b[0]], [a[1], b[1]], color=STATUS_RGBA[Status(s)], lw=width)
 
 
 def save(fig, path, dpi: int = 90) -> None:
