@@ -125,8 +125,7 @@ def _bridge(args) -> dict:
             rng = np.random.default_rng(args.seed + rep)
             t0 = time.perf_counter()
             runner = ChainRunner(system, "hmc", rng)
-            z = runner.run(np.tile(z0, (chains, 1)), burn)[:, -1]
-            y = runner.run(z, -(-n // chains)) @ root.T
+            y = runner.run(np.tile(z0, (chains, 1)), -(-n // chains), burn_in=burn) @ root.T
             seconds = time.perf_counter() - t0
             assert np.all(y <= 1e-9)
             ess = float(effective_sample_size(y).min())
