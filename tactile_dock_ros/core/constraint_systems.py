@@ -16,10 +16,12 @@ from .constraints import PairStructure, bilinear, observation_primitives, quad
 from .history import History
 from .shape import GaussianShape
 
+_QUAD_GRADIENT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0])
+
 
 def _quad_gradient(y: np.ndarray) -> np.ndarray:
     """Gradient of ``quad`` at y (..., 4)."""
-    return np.stack([-y[..., 3], y[..., 2], y[..., 1], -y[..., 0]], axis=-1)
+    return y[..., ::-1] * _QUAD_GRADIENT_SIGN
 
 
 class HistoryConstraints:
@@ -187,8 +189,8 @@ class HistoryConstraints:
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
         rows = self.shape.basis[self._rows[self.prim_pair[prim]]]  # (C, 4, m)
-        y = np.einsum("cjm,cm->cj", rows, z)
-        quad_part = np.einsum("cj,cjm->cm", _quad_gradient(y), rows)
+        y = np.matmul(rows, z[:, :, None])[..., 0]
+        quad_part = np.matmul(_quad_gradient(y)[:, None], rows)[:, 0]
         return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
 
 

@@ -20,6 +20,7 @@ from scipy.special import log_ndtr, ndtri_exp
 # Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
 # spurious root only splits a segment in two, which the midpoint test makes harmless.
 _IMAG_TOL = 1e-6
+_MINUS_PLUS = np.array([-1.0, 1.0])
 
 
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -82,63 +83,69 @@ def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.sqrt(np.maximum(2 * m, 0.0))
     split = s > 1e-7 * (1 + np.sqrt(np.abs(p)))
     s = np.where(split, s, 1.0)
-    lin = np.stack([-s, s], axis=1)  # (n, 2) monic quadratics y^2 + lin y + const
-    const = (0.5 * p + m)[:, None] + np.stack([0.5, -0.5], 0)[None] * (q / s)[:, None]
+    lin = s[:, None] * _MINUS_PLUS  # (n, 2) monic quadratics y^2 + lin y + const
+    const = (0.5 * p + m)[:, None] - (0.5 * q / s)[:, None] * _MINUS_PLUS
     disc2 = lin * lin - 4 * const
-    slack = 4 * _IMAG_TOL**2 * (1 + 0.5 * np.abs(lin)) ** 2
+    real = disc2 >= -4 * _IMAG_TOL**2 * ((1 + 0.5 * s) ** 2)[:, None]
     half = -0.5 * (lin + np.copysign(np.sqrt(np.maximum(disc2, 0.0)), lin))  # |half| >= s/2
-    x = np.concatenate([half, const / half], axis=1)
-    x = np.where(np.tile(disc2 >= -slack, 2), x - 0.25 * a[:, None], np.nan)
+    x = np.empty((len(coef), 4))
+    x[:, :2], x[:, 2:] = half, const / half
+    x -= 0.25 * a[:, None]
+    x[:, :2][~real] = np.nan
+    x[:, 2:][~real] = np.nan
     f = (((coef[:, :1] * x + coef[:, 1:2]) * x + coef[:, 2:3]) * x + coef[:, 3:4]) * x
     df = ((4 * coef[:, :1] * x + 3 * coef[:, 1:2]) * x + 2 * coef[:, 2:3]) * x + coef[:, 3:4]
     x -= (f + coef[:, 4:]) / np.where(np.abs(df) > 1e-12, df, np.inf)
     return x, ~split
 
 
+def _horner(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Values (n, j) of quartics coef (n, 5) at u (n, j)."""
+    val = coef[:, :1] * u + coef[:, 1:2]
+    for j in range(2, 5):
+        val = val * u + coef[:, j : j + 1]
+    return val
+
+
 def quartic_roots(coef: np.ndarray, window: tuple | None = None) -> np.ndarray:
-    """Real roots (..., 4) of polynomials with coefficients (..., 5), highest degree first
-    (NaN where absent).
+    """Real roots (n, 4) of polynomials with coefficients (n, 5), highest degree first (NaN
+    where absent).
 
     Closed form (``_ferrari_roots``), which costs a few dozen vectorized operations instead of
     one LAPACK call per polynomial. Polynomials for which the closed form is unreliable are
     solved by companion-matrix eigenvalues instead: a leading coefficient below 1e-4 of the
     largest (roots far out, cancellation), non-finite results, and, if ``window`` = (lo, hi)
-    (each broadcast to coef.shape[:-1]) is given, a count of roots in (lo, hi) whose parity
-    disagrees with the sign change of the polynomial across it (a missed crossing).
+    (scalars or (n,)) is given, a count of roots in (lo, hi) whose parity disagrees with the
+    sign change of the polynomial across it (a missed crossing).
     """
-    coef = np.asarray(coef, dtype=float)
-    shape = coef.shape[:-1]
-    coef = coef.reshape(-1, 5)
-    scale = np.abs(coef).max(axis=-1, keepdims=True)
-    coef = coef / np.where(scale > 0, scale, 1.0)
+    coef = np.asarray(coef, dtype=float).reshape(-1, 5)
+    scale = np.abs(coef).max(axis=1, keepdims=True)
+    zero = scale[:, 0] == 0
+    coef = coef / np.where(zero[:, None], 1.0, scale)
     closed = np.abs(coef[:, 0]) >= 1e-4
-    out = np.full((len(coef), 4), np.nan)
-    rows = np.flatnonzero(closed)
-    x, bad = _ferrari_roots(coef[rows])
-    bad |= np.isinf(x).any(axis=1)
+    x, bad = _ferrari_roots(np.where(closed[:, None], coef, 1.0))
+    bad |= ~closed | np.isinf(x).any(axis=1)
     if window is not None:
-        ends = np.stack(
-            [np.broadcast_to(np.asarray(w, float), shape).reshape(-1)[rows] for w in window], 1
-        )  # (n, 2)
-        inside = np.sum((x > ends[:, :1]) & (x < ends[:, 1:]), axis=1)
-        poly = coef[rows]
-        val = poly[:, :1] * ends + poly[:, 1:2]
-        for j in range(2, 5):  # Horner
-            val = val * ends + poly[:, j : j + 1]
+        ends = np.empty((len(coef), 2))
+        ends[:, 0], ends[:, 1] = window
+        inside = ((x > ends[:, :1]) & (x < ends[:, 1:])).sum(axis=1)
+        val = _horner(coef, ends)
         bad |= (inside % 2 == 1) != (val[:, 0] * val[:, 1] < 0)
-    out[rows] = x
-    fallback = ~closed
-    fallback[rows[bad]] = True
-    if fallback.any():
-        out[fallback] = _companion_roots(coef[fallback])
-    out[scale[:, 0] == 0] = np.nan
-    return out.reshape(*shape, 4)
+    bad &= ~zero
+    if bad.any():
+        x[bad] = _companion_roots(coef[bad])
+    x[zero] = np.nan
+    return x
 
 
 def trig_basis(t: np.ndarray) -> np.ndarray:
     """(..., 5): 1, cos t, sin t, cos 2t, sin 2t."""
     t = np.asarray(t, dtype=float)
-    return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
+    out = np.empty((*t.shape, 5))
+    cos, sin = np.cos(t), np.sin(t)
+    out[..., 0], out[..., 1], out[..., 2] = 1.0, cos, sin
+    out[..., 3], out[..., 4] = 2 * cos * cos - 1, 2 * sin * cos
+    return out
 
 
 def _sorted_roots(

@@ -225,7 +225,7 @@ def hmc_chains(
         if bounce.any():
             prim = owner[rows[bounce], first[bounce] - 1]
             grad = system.gradient(z_new[bounce], prim)
-            norm = np.linalg.norm(grad, axis=1, keepdims=True)
+            norm = np.sqrt((grad * grad).sum(axis=1, keepdims=True))
             unit = grad / np.where(norm > 0, norm, 1.0)
             pb = p_new[bounce]
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
