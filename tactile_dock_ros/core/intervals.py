@@ -78,8 +78,10 @@ def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     w = np.where(w == 0, 1e-300, w)
     m = np.where(three_real, t, w - big_p / (3 * w)) - p / 3
     c1 = 0.25 * p * p - r
-    df = (3 * m + 2 * p) * m + c1  # > 0 at the largest root unless it is a multiple one
-    m -= (((m + p) * m + c1) * m - 0.125 * q * q) / np.where(df > 0, df, np.inf)
+    df = (3 * m + 2 * p) * m + c1
+    step = (((m + p) * m + c1) * m - 0.125 * q * q) / np.where(df != 0, df, np.inf)
+    # a polish, not a search: near a double root (df ~ 0) the step would be meaningless
+    m -= np.where(np.abs(step) <= 1e-6 * (1 + np.abs(m)), step, 0.0)
     s = np.sqrt(np.maximum(2 * m, 0.0))
     split = s > 1e-7 * (1 + np.sqrt(np.abs(p)))
     s = np.where(split, s, 1.0)
@@ -113,7 +115,7 @@ def quartic_roots(coef: np.ndarray, window: tuple | None = None) -> np.ndarray:
 
     Closed form (``_ferrari_roots``), which costs a few dozen vectorized operations instead of
     one LAPACK call per polynomial. Polynomials for which the closed form is unreliable are
-    solved by companion-matrix eigenvalues instead: a leading coefficient below 1e-4 of the
+    solved by companion-matrix eigenvalues instead: a leading coefficient below 1e-3 of the
     largest (roots far out, cancellation), non-finite results, and, if ``window`` = (lo, hi)
     (scalars or (n,)) is given, a count of roots in (lo, hi) whose parity disagrees with the
     sign change of the polynomial across it (a missed crossing).
@@ -122,7 +124,7 @@ def quartic_roots(coef: np.ndarray, window: tuple | None = None) -> np.ndarray:
     scale = np.abs(coef).max(axis=1, keepdims=True)
     zero = scale[:, 0] == 0
     coef = coef / np.where(zero[:, None], 1.0, scale)
-    closed = np.abs(coef[:, 0]) >= 1e-4
+    closed = np.abs(coef[:, 0]) >= 1e-3
     x, bad = _ferrari_roots(np.where(closed[:, None], coef, 1.0))
     bad |= ~closed | np.isinf(x).any(axis=1)
     if window is not None:
