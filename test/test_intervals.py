@@ -169,3 +169,35 @@ def test_truncated_normal_on_union_matches_moments_and_tails():
         edges[:3], np.zeros((3, 1), bool), np.zeros(3), np.ones(3), rng
     )
     assert not found.any() and np.isnan(y).all()
+
+
+@pytest.mark.parametrize("lead", [1.0, 2e-3, 1e-7])
+def test_quartic_roots_in_a_window_from_known_roots(lead):
+    """Closed form with its fallbacks: quartics built from known roots (distinct, double,
+    symmetric biquadratic, with a complex pair), times (1 + lead x): a small leading coefficient
+    puts a root far out (closed form down to 1e-3, then companion eigenvalues)."""
+    rng = np.random.default_rng(5)
+    cases = []
+    for _ in range(400):
+        kind = rng.integers(4)
+        if kind == 0:
+            roots = rng.uniform(-1, 1, 3)
+        elif kind == 1:  # a double root, apart from the simple one
+            r = rng.uniform(-0.8, -0.1), rng.uniform(0.1, 0.8)
+            roots = np.array([r[0], r[0], r[1]])
+        elif kind == 2:  # with -1/lead: biquadratic (q = 0 in the depressed form) for lead 1
+            a = rng.uniform(0.1, 0.8)
+            roots = np.array([a, -a, 1.0 / lead])
+        else:  # a real root and a complex pair
+            roots = np.array([rng.uniform(-1, 1), 0.3 + 0.5j, 0.3 - 0.5j])
+        poly = np.real(np.polymul(np.poly(roots), [lead, 1.0]))
+        cases.append((poly, np.append(roots, -1.0 / lead), kind == 1))
+    got = quartic_roots(np.array([c[0] for c in cases]), (-0.9, 0.95))
+    for (_, roots, double), r in zip(cases, got, strict=True):
+        real = np.real(roots[np.abs(np.imag(roots)) < 1e-12])
+        want = real[(real > -0.9) & (real < 0.95)]
+        found = r[(r > -0.9) & (r < 0.95)]
+        tol = 1e-4 if double else 1e-8  # a double root is ill-conditioned for any method
+        # every root in the window is found, and nothing else (a double root may split)
+        assert all(np.min(np.abs(found - w), initial=np.inf) < tol for w in want)
+        assert all(np.min(np.abs(want - f)) < tol for f in found)

@@ -30,10 +30,9 @@ def test_half_plane_truncation_moments(method):
     rng = np.random.default_rng(7)
     runner = ChainRunner(system, method, rng)
     z = np.tile(2 * w, (8, 1))
-    runner.run(z, 200 if method == "mh" else 20, adapt=True)
-    z = np.tile(2 * w, (8, 1))
+    runner.run(z, 0, burn_in=200 if method == "mh" else 20)  # adapts the MH step
     steps = {"hmc": 250, "gibbs": 400, "mh": 3000}[method]
-    draws = runner.run(runner.run(z, 50)[:, -1], steps)  # (8, steps, 3)
+    draws = runner.run(z, steps, burn_in=50)  # (8, steps, 3)
     s = draws @ w
     assert np.all(s >= 1 - 1e-9)
     mean_ref = stats.norm.pdf(1) / stats.norm.sf(1)
@@ -207,3 +206,51 @@ def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
     for end, count in ends.values():
         assert count == bounces
         np.testing.assert_allclose(end, whole, atol=1e-8)
+
+
+def test_live_pair_exit_search_matches_every_primitive():
+    """The exit search that evaluates only live pairs (and contact observations without live
+    pairs) finds the same first infeasible segment as judging every primitive."""
+    problem = problems.get("notch")
+    truth = problem.sample_ground_truth(np.random.default_rng(3))
+    history = probe_history(problem, truth, np.linspace(-0.25, 0.25, 6))
+    shape = problem.prior
+    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
+    assert system.n_prims > sampling.WINDOW_MIN_PRIMITIVES  # the live-pair path
+    rng = np.random.default_rng(4)
+    z = sample_posterior(shape, history, 48, rng).z
+    p = rng.standard_normal(z.shape)
+    span = rng.uniform(0.05, np.pi / 2, len(z))
+    coef = system.ellipse_coefficients(z, p)
+    solve = sampling.window_can_vanish(coef, span)
+    live = system.live_pairs(coef[..., 0] + coef[..., 1] + coef[..., 3], solve)
+    roots, _ = sampling.ellipse_roots(coef, solve & live[:, system.prim_pair], system.linear, span)
+    _, mids = sampling.segment_edges(roots, np.zeros(len(z)), span)
+    n_real = np.sum(np.isfinite(roots), axis=1) + 1
+    hit, first = sampling._first_infeasible(system, coef, mids, n_real, live)
+    g = np.matmul(sampling.trig_basis(mids), coef.swapaxes(1, 2))
+    bad = np.any(system.violations(g) > 0, axis=-1)
+    bad &= np.arange(mids.shape[1]) < n_real[:, None]
+    assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
+    np.testing.assert_array_equal(hit, bad.any(axis=1))
+    np.testing.assert_array_equal(first[hit], np.argmax(bad[hit], axis=1))
+
+
+def test_burn_in_runs_in_the_same_hmc_batch(sloper_case):
+    """``run(z, steps, thin, burn_in)`` keeps the states after the burn-in moves, every
+    ``thin``-th move, of one ``hmc_chains`` batch with the same random stream."""
+    problem, history = sloper_case
+    z = sample_posterior(problem.prior, history, 16, np.random.default_rng(2)).z[:4]
+    system = HistoryConstraints(problem.prior, history, prune_pairs(problem.prior, history, 1e-4))
+    kept = ChainRunner(system, "hmc", np.random.default_rng(5)).run(z, 3, thin=2, burn_in=1)
+    every, _ = sampling.hmc_chains(system, z, 7, np.random.default_rng(5))
+    np.testing.assert_array_equal(kept, every[:, [2, 4, 6]])
+
+
+@pytest.mark.parametrize("n", [1, 100, 255, 257, 1000, 1025, 5000])
+def test_default_hmc_chains_cover_the_samples_without_surplus(n):
+    chains = sampling.default_chains("hmc", n)
+    per_chain = -(-n // chains)
+    assert 16 <= chains <= 64
+    if chains > 16:  # above the minimum: >= 16 draws per chain, less than one chain surplus
+        assert per_chain >= 16 and chains * per_chain - n < per_chain

@@ -16,10 +16,12 @@ from .constraints import PairStructure, bilinear, observation_primitives, quad
 from .history import History
 from .shape import GaussianShape
 
+_QUAD_GRADIENT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0])
+
 
 def _quad_gradient(y: np.ndarray) -> np.ndarray:
     """Gradient of ``quad`` at y (..., 4)."""
-    return np.stack([-y[..., 3], y[..., 2], y[..., 1], -y[..., 0]], axis=-1)
+    return y[..., ::-1] * _QUAD_GRADIENT_SIGN
 
 
 class HistoryConstraints:
@@ -48,6 +50,9 @@ class HistoryConstraints:
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
         self.pair_prims = self._prim_index  # (P, 6) primitive of each slot, -1 inactive
+        self.pair_observation = pairs[:, 0]  # (P,) sorted
+        self.pair_free = self.structure.free_pair  # (P,) pairs of free observations
+        self.contact_observations = np.flatnonzero(~self.structure.free_obs)
         # flat per-primitive coefficients (K,), (K, 4), (K,)
         self._psign = self._sign[self.prim_pair, self.prim_slot]
         self._plin = self._lin[self.prim_pair, self.prim_slot]
@@ -114,22 +119,6 @@ class HistoryConstraints:
         free_val = np.maximum(-gmax, gmin)
         contact = np.maximum(gmax, np.maximum(g5, g6))
         return np.where(self.structure.free_pair[pair, None], free_val, contact)
-
-    def observation_columns(self, pair: np.ndarray) -> np.ndarray:
-        """Sorted indices of all pairs of the observations that own ``pair``."""
-        obs = self.structure.pairs[:, 0]
-        owners = np.zeros(self.n_obs, dtype=bool)
-        owners[obs[pair]] = True
-        return np.flatnonzero(owners[obs])
-
-    def reduce_columns(self, pair: np.ndarray, columns: np.ndarray) -> np.ndarray:
-        """Values (..., k') of the observations owning ``columns`` (from
-        ``observation_columns``) from their per-pair values ``pair`` (..., len(columns))."""
-        obs = self.structure.pairs[columns, 0]
-        starts = np.flatnonzero(np.diff(obs, prepend=-1))
-        q = np.where(self.structure.free_pair[columns], -pair, pair)
-        m = np.minimum.reduceat(q, starts, axis=-1)
-        return np.where(self.structure.free_obs[obs[starts]], -m, m)
 
     def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For each row, the primitive k and sign s with f_obs(z) = s g_k(z) locally (the
@@ -200,8 +189,8 @@ class HistoryConstraints:
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         """Gradients (C, m) of primitive ``prim[c]`` at state ``z[c]``."""
         rows = self.shape.basis[self._rows[self.prim_pair[prim]]]  # (C, 4, m)
-        y = np.einsum("cjm,cm->cj", rows, z)
-        quad_part = np.einsum("cj,cjm->cm", _quad_gradient(y), rows)
+        y = np.matmul(rows, z[:, :, None])[..., 0]
+        quad_part = np.matmul(_quad_gradient(y)[:, None], rows)[:, 0]
         return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
 
 
@@ -219,6 +208,9 @@ class LinearConstraints:
         self.n_pairs = self.n_prims  # each inequality is its own pair and observation
         self.prim_pair = np.arange(self.n_prims)
         self.pair_prims = self.prim_pair[:, None]
+        self.pair_observation = self.prim_pair  # each violated iff its value is > 0, as a
+        self.pair_free = np.ones(self.n_prims, dtype=bool)  # free observation's pair
+        self.contact_observations = np.zeros(0, dtype=int)
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return z @ self.F.T + self.h
@@ -226,20 +218,8 @@ class LinearConstraints:
     def violations(self, g: np.ndarray) -> np.ndarray:
         return g
 
-    def pair_values_of(self, g: np.ndarray) -> np.ndarray:
-        return g
-
-    def reduce_pairs(self, pair: np.ndarray) -> np.ndarray:
-        return pair
-
     def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
         return g[..., 0]
-
-    def observation_columns(self, pair: np.ndarray) -> np.ndarray:
-        return np.unique(pair)
-
-    def reduce_columns(self, pair: np.ndarray, columns: np.ndarray) -> np.ndarray:
-        return pair
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         zeros = np.zeros((len(z0), self.n_prims))

@@ -20,6 +20,7 @@ from scipy.special import log_ndtr, ndtri_exp
 # Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
 # spurious root only splits a segment in two, which the midpoint test makes harmless.
 _IMAG_TOL = 1e-6
+_MINUS_PLUS = np.array([-1.0, 1.0])
 
 
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -38,31 +39,115 @@ def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(roots), roots, np.nan)
 
 
-def quartic_roots(coef: np.ndarray) -> np.ndarray:
-    """Real roots (..., 4) of polynomials with coefficients (..., 5), highest degree first.
-
-    Batched companion-matrix eigenvalues. A vanishing leading coefficient is replaced by a tiny
-    one, which sends that root to infinity without moving the finite ones.
-    """
-    coef = np.asarray(coef, dtype=float)
-    scale = np.abs(coef).max(axis=-1, keepdims=True)
-    coef = coef / np.where(scale > 0, scale, 1.0)
-    lead = coef[..., :1]
+def _companion_roots(coef: np.ndarray) -> np.ndarray:
+    """Real roots (n, 4) of quartics coef (n, 5), scaled to max |coef| = 1, by batched
+    companion-matrix eigenvalues. A vanishing leading coefficient is replaced by a tiny one,
+    which sends that root to infinity without moving the finite ones."""
+    lead = coef[:, :1]
     tiny = 1e-13
     lead = np.where(np.abs(lead) < tiny, np.where(lead < 0, -tiny, tiny), lead)
-    monic = coef[..., 1:] / lead
-    comp = np.zeros((*coef.shape[:-1], 4, 4))
-    comp[..., 0, :] = -monic
-    comp[..., 1, 0] = comp[..., 2, 1] = comp[..., 3, 2] = 1.0
+    comp = np.zeros((len(coef), 4, 4))
+    comp[:, 0, :] = -coef[:, 1:] / lead
+    comp[:, 1, 0] = comp[:, 2, 1] = comp[:, 3, 2] = 1.0
     eig = np.linalg.eigvals(comp)
     real = np.abs(eig.imag) <= _IMAG_TOL * (1.0 + np.abs(eig.real))
-    return np.where(real & (scale > 0), eig.real, np.nan)
+    return np.where(real, eig.real, np.nan)
+
+
+def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Real roots (n, 4) of quartics coef (n, 5) (scaled, leading coefficient not tiny) in
+    closed form, and a mask of the rows the closed form cannot split (q ~ 0, left to the
+    caller). The depressed quartic y^4 + p y^2 + q y + r splits into the two quadratics
+    y^2 -+ s y + p/2 + m +- q / (2 s), s = sqrt(2 m), with m > 0 the largest root of the
+    resolvent cubic m^3 + p m^2 + (p^2/4 - r) m - q^2/8 (Cardano / Viete, Newton-polished).
+    Complex pairs whose imaginary part is below _IMAG_TOL (1 + |real part|) count as a double
+    real root (as in ``_companion_roots``); every root gets one Newton step on the quartic."""
+    a, b, c, d = (coef[:, 1:] / coef[:, :1]).T
+    a2 = a * a
+    p = b - 0.375 * a2
+    q = c - 0.5 * a * b + 0.125 * a2 * a
+    r = d - 0.25 * a * c + (b / 16 - 3 * a2 / 256) * a2
+    # resolvent cubic, depressed with m = t - p/3: t^3 + P t + Q = 0
+    big_p = -p * p / 12 - r
+    big_q = (r / 3 - p * p / 108) * p - q * q / 8
+    disc = 0.25 * big_q * big_q + big_p**3 / 27
+    three_real = disc < 0  # then big_p < 0: Viete's largest root
+    root3 = np.sqrt(np.maximum(-big_p / 3, 1e-100))
+    t = 2 * root3 * np.cos(np.arccos(np.clip(-0.5 * big_q / root3**3, -1, 1)) / 3)
+    w = np.cbrt(-0.5 * big_q - np.copysign(np.sqrt(np.maximum(disc, 0.0)), big_q))
+    w = np.where(w == 0, 1e-300, w)
+    m = np.where(three_real, t, w - big_p / (3 * w)) - p / 3
+    c1 = 0.25 * p * p - r
+    df = (3 * m + 2 * p) * m + c1
+    step = (((m + p) * m + c1) * m - 0.125 * q * q) / np.where(df != 0, df, np.inf)
+    # a polish, not a search: near a double root (df ~ 0) the step would be meaningless
+    m -= np.where(np.abs(step) <= 1e-6 * (1 + np.abs(m)), step, 0.0)
+    s = np.sqrt(np.maximum(2 * m, 0.0))
+    split = s > 1e-7 * (1 + np.sqrt(np.abs(p)))
+    s = np.where(split, s, 1.0)
+    lin = s[:, None] * _MINUS_PLUS  # (n, 2) monic quadratics y^2 + lin y + const
+    const = (0.5 * p + m)[:, None] - (0.5 * q / s)[:, None] * _MINUS_PLUS
+    disc2 = lin * lin - 4 * const
+    real = disc2 >= -4 * _IMAG_TOL**2 * ((1 + 0.5 * s) ** 2)[:, None]
+    half = -0.5 * (lin + np.copysign(np.sqrt(np.maximum(disc2, 0.0)), lin))  # |half| >= s/2
+    x = np.empty((len(coef), 4))
+    x[:, :2], x[:, 2:] = half, const / half
+    x -= 0.25 * a[:, None]
+    x[:, :2][~real] = np.nan
+    x[:, 2:][~real] = np.nan
+    f = (((coef[:, :1] * x + coef[:, 1:2]) * x + coef[:, 2:3]) * x + coef[:, 3:4]) * x
+    df = ((4 * coef[:, :1] * x + 3 * coef[:, 1:2]) * x + 2 * coef[:, 2:3]) * x + coef[:, 3:4]
+    x -= (f + coef[:, 4:]) / np.where(np.abs(df) > 1e-12, df, np.inf)
+    return x, ~split
+
+
+def _horner(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Values (n, j) of quartics coef (n, 5) at u (n, j)."""
+    val = coef[:, :1] * u + coef[:, 1:2]
+    for j in range(2, 5):
+        val = val * u + coef[:, j : j + 1]
+    return val
+
+
+def quartic_roots(coef: np.ndarray, window: tuple | None = None) -> np.ndarray:
+    """Real roots (n, 4) of polynomials with coefficients (n, 5), highest degree first (NaN
+    where absent).
+
+    Closed form (``_ferrari_roots``), which costs a few dozen vectorized operations instead of
+    one LAPACK call per polynomial. Polynomials for which the closed form is unreliable are
+    solved by companion-matrix eigenvalues instead: a leading coefficient below 1e-3 of the
+    largest (roots far out, cancellation), non-finite results, and, if ``window`` = (lo, hi)
+    (scalars or (n,)) is given, a count of roots in (lo, hi) whose parity disagrees with the
+    sign change of the polynomial across it (a missed crossing).
+    """
+    coef = np.asarray(coef, dtype=float).reshape(-1, 5)
+    scale = np.abs(coef).max(axis=1, keepdims=True)
+    zero = scale[:, 0] == 0
+    coef = coef / np.where(zero[:, None], 1.0, scale)
+    closed = np.abs(coef[:, 0]) >= 1e-3
+    x, bad = _ferrari_roots(np.where(closed[:, None], coef, 1.0))
+    bad |= ~closed | np.isinf(x).any(axis=1)
+    if window is not None:
+        ends = np.empty((len(coef), 2))
+        ends[:, 0], ends[:, 1] = window
+        inside = ((x > ends[:, :1]) & (x < ends[:, 1:])).sum(axis=1)
+        val = _horner(coef, ends)
+        bad |= (inside % 2 == 1) != (val[:, 0] * val[:, 1] < 0)
+    bad &= ~zero
+    if bad.any():
+        x[bad] = _companion_roots(coef[bad])
+    x[zero] = np.nan
+    return x
 
 
 def trig_basis(t: np.ndarray) -> np.ndarray:
     """(..., 5): 1, cos t, sin t, cos 2t, sin 2t."""
     t = np.asarray(t, dtype=float)
-    return np.stack([np.ones_like(t), np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)], -1)
+    out = np.empty((*t.shape, 5))
+    cos, sin = np.cos(t), np.sin(t)
+    out[..., 0], out[..., 1], out[..., 2] = 1.0, cos, sin
+    out[..., 3], out[..., 4] = 2 * cos * cos - 1, 2 * sin * cos
+    return out
 
 
 def _sorted_roots(
@@ -119,6 +204,22 @@ def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
     return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
+def _trig_to_quartic(phi: float) -> np.ndarray:
+    """(5, 5) map from trig coefficients (k0..k4) of g(t) to the quartic (highest degree first)
+    (1 + u^2)^2 g(phi + 2 atan u) in u = tan((t - phi)/2)."""
+    c1, s1, c2, s2 = np.cos(phi), np.sin(phi), np.cos(2 * phi), np.sin(2 * phi)
+    shift = np.array(
+        [
+            [1, 0, 0, 0, 0],
+            [0, c1, s1, 0, 0],
+            [0, -s1, c1, 0, 0],
+            [0, 0, 0, c2, s2],
+            [0, 0, 0, -s2, c2],
+        ]
+    )  # coefficients of g(phi + tau) in tau
+    return (_TRIG_TO_POLY[::-1] @ shift).T
+
+
 def ellipse_roots(
     coef: np.ndarray,
     solve: np.ndarray,
@@ -128,27 +229,26 @@ def ellipse_roots(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times in (t_min, t_max[c]) where a primitive along the ellipse vanishes, sorted (C, R).
 
-    Only primitives with ``solve`` (C, K) are solved. With u = tan(t/2) a trigonometric
-    polynomial of degree 2 becomes a quartic in u (a quadratic for ``linear`` primitives, whose
-    k3 = k4 = 0); t_max must be < pi.
+    Only primitives with ``solve`` (C, K) are solved; t_max must be < pi. With u = tan(t/2) a
+    linear primitive (k3 = k4 = 0) becomes a quadratic in u; systems made only of those solve
+    quadratics. Otherwise every solved primitive is a quartic (one batch), in time shifted to
+    the middle of the longest window, phi = max(t_max) / 2: u = tan((t - phi)/2) sends the
+    point opposite the windows to infinity, so a small leading coefficient (the closed form's
+    weak case) means g is small far from every window, not at its start, where the primitive
+    just bounced on vanishes.
     """
     t_max = np.asarray(t_max, dtype=float)
     lo = np.full(len(t_max), t_min)
-    ci, ki = np.nonzero(solve & linear[None])
-    k0, k1, k2 = coef[ci, ki, :3].T
-    lin = quadratic_roots(k0 - k1, 2 * k2, k0 + k1)  # (n, 2)
-    cq, kq = np.nonzero(solve & ~linear[None])
-    k0, k1, k2, k3, k4 = coef[cq, kq].T
-    poly = np.stack(
-        [k0 - k1 + k3, 2 * k2 - 4 * k4, 2 * k0 - 6 * k3, 2 * k2 + 4 * k4, k0 + k1 + k3], axis=-1
-    )
-    u = np.full((ci.size + cq.size, 4), np.nan)
-    u[: ci.size, :2] = lin
-    if cq.size:
-        u[ci.size :] = quartic_roots(poly)
-    return _sorted_roots(
-        np.concatenate([ci, cq]), 2 * np.arctan(u), np.concatenate([ki, kq]), lo, t_max
-    )
+    ci, ki = np.nonzero(solve)
+    if np.all(linear):
+        k0, k1, k2 = coef[ci, ki, :3].T
+        t = 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1))
+    else:
+        phi = 0.5 * float(t_max.max(initial=0.0))
+        poly = coef[ci, ki] @ _trig_to_quartic(phi)
+        window = (np.tan(0.5 * (t_min - phi)), np.tan(0.5 * (t_max[ci] - phi)))
+        t = phi + 2 * np.arctan(quartic_roots(poly, window))
+    return _sorted_roots(ci, t, ki, lo, t_max)
 
 
 def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -85,43 +85,57 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
-def _first_infeasible(system, coef, mids, n_real, live, base, chunk: int = 16):
+def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
     such segment. Row c has ``n_real[c]`` segments; the rest are the zero-width padding at the
-    window end (judged by the last real one) and are never evaluated. Only the ``live`` (C, P)
-    pairs are evaluated: every other pair keeps the sign of its value ``base`` (C, P) at the
-    window start throughout the window (``live_pairs``), so observations without live pairs
-    stay satisfied and only the others are reduced. Small systems (<= WINDOW_MIN_PRIMITIVES
-    primitives) evaluate every primitive: fewer numpy calls. Chunked: the first exit is usually
-    among the first few roots, and a row leaves once its real segments are judged."""
+    window end (judged by the last real one) and are never evaluated.
+
+    Only the ``live`` (C, P) pairs (``live_pairs``) are evaluated: any other pair has, through
+    the window, a primitive of fixed sign against the crossing pattern, so a non-live free pair
+    stays uncrossed and a non-live contact pair stays unsatisfied. Hence a free observation is
+    violated iff one of its live pairs is crossed, a contact observation iff all its live pairs
+    are unsatisfied, and a contact observation without live pairs is violated from the start
+    (first segment). Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every
+    primitive instead: fewer numpy calls. Chunked: the first exit is usually among the first
+    few roots, and a row leaves once its real segments are judged."""
     c, n_seg = mids.shape
     hit = np.zeros(c, dtype=bool)
     first = np.zeros(c, dtype=int)
     ci, pj = np.nonzero(live)
-    if ci.size == 0:
-        return hit, first
     if system.n_prims <= WINDOW_MIN_PRIMITIVES:
+        if ci.size == 0:
+            return hit, first
 
         def violated(rows, span):
             g = np.matmul(trig_basis(mids[rows, span]), coef[rows].swapaxes(1, 2))
             return np.any(system.violations(g) > 0, axis=-1)
 
     else:
-        columns = system.observation_columns(pj)
-        at_column = np.searchsorted(columns, pj)
+        obs, free = system.pair_observation[pj], system.pair_free[pj]
+        if system.contact_observations.size:
+            covered = np.zeros((c, system.n_obs), dtype=bool)
+            covered[ci, obs] = True
+            hit = ~covered[:, system.contact_observations].all(axis=1)
         prims = system.pair_prims[pj]  # (R, 6)
         inactive = (prims < 0)[:, None]
         pair_coef = coef[ci[:, None], np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
-        base = base[:, columns]
+        # live pairs come sorted by (row, observation): contiguous groups for the reductions
+        group = ci * system.n_obs + obs
 
         def violated(rows, span):
-            values = np.repeat(base[rows, None], len(range(n_seg)[span]), axis=1)  # (r, s, P')
             sel = np.flatnonzero(todo[ci])
-            at_row = np.cumsum(todo)[ci[sel]] - 1  # position of the live pair's chain in rows
-            g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])
+            g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])  # (R', s, 6)
             g = np.where(inactive[sel], -np.inf, g)
-            values[at_row, :, at_column[sel]] = system.pair_values_at(pj[sel], g)
-            return np.any(system.reduce_columns(values, columns) > 0, axis=-1)
+            q = system.pair_values_at(pj[sel], g)
+            q = np.where(free[sel, None], -q, q)  # free: max over pairs, contact: min
+            starts = np.flatnonzero(np.diff(group[sel], prepend=-1))
+            m = np.minimum.reduceat(q, starts, axis=0)
+            bad = np.where(free[sel][starts, None], -m, m) > 0  # (groups, s)
+            at_row = np.cumsum(todo)[ci[sel][starts]] - 1  # the group's position in rows
+            row_starts = np.flatnonzero(np.diff(at_row, prepend=-1))
+            out = np.zeros((rows.size, bad.shape[1]), dtype=bool)
+            out[at_row[row_starts]] = np.logical_or.reduceat(bad, row_starts, axis=0)
+            return out
 
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
         todo = ~hit & (n_real > lo)
@@ -201,7 +215,7 @@ def hmc_chains(
         roots, owner = ellipse_roots(coef, solve, system.linear, span)
         edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
         n_real = np.sum(np.isfinite(roots), axis=1) + 1
-        hit, first = _first_infeasible(system, coef, mids, n_real, live, system.pair_values_of(g0))
+        hit, first = _first_infeasible(system, coef, mids, n_real, live)
         stuck = hit & (first == 0)
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
@@ -211,7 +225,7 @@ def hmc_chains(
         if bounce.any():
             prim = owner[rows[bounce], first[bounce] - 1]
             grad = system.gradient(z_new[bounce], prim)
-            norm = np.linalg.norm(grad, axis=1, keepdims=True)
+            norm = np.sqrt((grad * grad).sum(axis=1, keepdims=True))
             unit = grad / np.where(norm > 0, norm, 1.0)
             pb = p_new[bounce]
             p_new[bounce] = pb - 2 * unit * np.sum(unit * pb, axis=1, keepdims=True)
@@ -294,19 +308,25 @@ class ChainRunner:
         self.stats["proposed"] += len(z)
         return z
 
-    def run(self, z: np.ndarray, steps: int, thin: int = 1, adapt: bool = False) -> np.ndarray:
-        """States after each of ``steps`` kept steps (``thin`` moves each): (C, steps, m)."""
+    def run(self, z: np.ndarray, steps: int, thin: int = 1, burn_in: int = 0) -> np.ndarray:
+        """States after each of ``steps`` kept steps (``thin`` moves each) that follow
+        ``burn_in`` discarded moves (MH adapts its step during those only): (C, steps, m).
+
+        HMC runs burn-in and kept moves in one asynchronous batch (``hmc_chains``), so the
+        chains do not wait for the slowest one in between."""
         if self.method == "hmc":
-            draws, stats = hmc_chains(self.system, z, steps * thin, self.rng, self.hmc_duration)
+            moves = burn_in + steps * thin
+            draws, stats = hmc_chains(self.system, z, moves, self.rng, self.hmc_duration)
             self.stats["bounces"] += stats["bounces"]
-            moves = draws.shape[0] * draws.shape[1]
-            self.stats["accepted"] += moves - stats["rejected"]
-            self.stats["proposed"] += moves
-            return draws[:, thin - 1 :: thin]
+            self.stats["accepted"] += len(z) * moves - stats["rejected"]
+            self.stats["proposed"] += len(z) * moves
+            return draws[:, burn_in + thin - 1 :: thin]
+        for _ in range(burn_in):
+            z = self.step(z, adapt=True)
         out = np.empty((len(z), steps, z.shape[1]))
         for i in range(steps):
             for _ in range(thin):
-                z = self.step(z, adapt)
+                z = self.step(z)
             out[:, i] = z
         return out
 
@@ -398,11 +418,13 @@ def _contact_projection(
 
 def default_chains(method: str, n_samples: int) -> int:
     """Chains when none are given: 16, and for HMC up to 64 so that each chain still yields
-    >= 16 draws. Decision: HMC's cost is dominated by per-bounce numpy calls over the whole
-    batch, so wider batches (fewer bounce iterations per sample) are cheaper per draw, while
-    each chain pays its own burn-in."""
+    >= 16 draws, as many chains as make chains x draws per chain closest above ``n_samples``
+    (no surplus draws). Decision: HMC's cost is dominated by per-bounce numpy calls over the
+    whole batch, so wider batches (fewer bounce iterations per sample) are cheaper per draw,
+    while each chain pays its own burn-in."""
     if method == "hmc":
-        return int(np.clip(n_samples // 16, 16, 64))
+        per_chain = max(16, -(-n_samples // 64))
+        return int(np.clip(-(-n_samples // per_chain), 16, 64))
     return 16
 
 
@@ -593,13 +615,12 @@ def sample_posterior(
         ]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
     runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
-    z = runner.run(z, burn_in, adapt=True)[:, -1] if burn_in else z
     chain_draws = [[] for _ in range(chains)]
     steps = 0
     while min(len(c) for c in chain_draws) < per_chain and steps < max_steps:
         need = per_chain - min(len(c) for c in chain_draws)
         count = min(need, max_steps - steps)
-        block = runner.run(z, count, thin=thin)  # (C, B, m)
+        block = runner.run(z, count, thin=thin, burn_in=0 if steps else burn_in)  # (C, B, m)
         z, steps = block[:, -1], steps + count
         ok = _consistent_rows(shape, sub, block.reshape(-1, shape.n_basis))
         ok = ok.reshape(chains, -1)
