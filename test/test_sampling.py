@@ -247,10 +247,10 @@ def test_burn_in_runs_in_the_same_hmc_batch(sloper_case):
     np.testing.assert_array_equal(kept, every[:, [2, 4, 6]])
 
 
-@pytest.mark.parametrize("n", [1, 100, 255, 257, 1000, 1025, 5000])
+@pytest.mark.parametrize("n", [1, 100, 255, 257, 1000, 1025, 4096, 5000, 20000])
 def test_default_hmc_chains_cover_the_samples_without_surplus(n):
     chains = sampling.default_chains("hmc", n)
     per_chain = -(-n // chains)
-    assert 16 <= chains <= 64
+    assert 16 <= chains <= sampling.MAX_HMC_CHAINS
     if chains > 16:  # above the minimum: >= 16 draws per chain, less than one chain surplus
         assert per_chain >= 16 and chains * per_chain - n < per_chain

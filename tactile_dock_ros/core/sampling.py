@@ -416,15 +416,19 @@ def _contact_projection(
     return z
 
 
+MAX_HMC_CHAINS = 256  # widest default batch: 4096 samples as 256 chains x 16 draws
+
+
 def default_chains(method: str, n_samples: int) -> int:
-    """Chains when none are given: 16, and for HMC up to 64 so that each chain still yields
-    >= 16 draws, as many chains as make chains x draws per chain closest above ``n_samples``
-    (no surplus draws). Decision: HMC's cost is dominated by per-bounce numpy calls over the
-    whole batch, so wider batches (fewer bounce iterations per sample) are cheaper per draw,
-    while each chain pays its own burn-in."""
+    """Chains when none are given: 16, and for HMC up to MAX_HMC_CHAINS so that each chain
+    still yields >= 16 draws, as many chains as make chains x draws per chain closest above
+    ``n_samples`` (no surplus draws). Decision: HMC's cost is dominated by per-bounce numpy
+    calls over the whole batch, so wider batches (fewer bounce iterations per sample) are
+    cheaper per draw, while each chain pays its own burn-in and 16 draws keep the per-chain
+    autocorrelation estimate of the ESS meaningful."""
     if method == "hmc":
-        per_chain = max(16, -(-n_samples // 64))
-        return int(np.clip(-(-n_samples // per_chain), 16, 64))
+        per_chain = max(16, -(-n_samples // MAX_HMC_CHAINS))
+        return int(np.clip(-(-n_samples // per_chain), 16, MAX_HMC_CHAINS))
     return 16
 
 
