@@ -36,7 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr, ndtr
+from scipy.special import log_ndtr, ndtr, ndtri
 
 from . import bvn
 from .shape import GaussianShape
@@ -90,51 +90,67 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
     """
     mean = np.asarray(mean, dtype=float)
     k, batch = len(mean), mean.shape[1:]
-    flat_mean = np.moveaxis(mean.reshape(k, -1), 0, -1)  # (M, k)
+    flat_mean = mean.reshape(k, -1)  # (k, M)
     flat_cov = np.moveaxis(np.asarray(cov, dtype=float).reshape(k, k, -1), -1, 0)  # (M, k, k)
-    return _orthant_rows(flat_mean, flat_cov).reshape(batch)
+    count = flat_mean.shape[1]
+    pick = np.broadcast_to(np.arange(k)[:, None], (k, count))
+    return _orthant_rows(flat_mean, flat_cov, np.arange(count), pick).reshape(batch)
 
 
-def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
-    """``positive_orthant_sequential`` on rows: mean (M, k), cov (M, k, k) -> (M,).
+def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.ndarray):
+    """``positive_orthant_sequential`` for S orthants whose covariances are sub-blocks of a pool.
 
-    The least likely condition is the one with the smallest standardized mean h (log_ndtr is
-    increasing), so only the chosen condition's probability is evaluated per step. Each
-    truncation is a rank-one downdate of the covariance, kept as (gain, shrink) pairs: a step
-    needs only the diagonal and the chosen column, never the whole updated matrix.
+    Orthant r has mean ``mean[:, r]`` (mean is (k, S)) and covariance ``cov[pos[r]][p][:, p]``
+    with p = ``pick[:, r]`` (pick (k, S) indexes the pool cov (P, K, K)), so events sharing
+    conditions need no copies of their blocks. Returns (S,).
+
+    The least likely condition is the one with the smallest standardized mean h, so only its
+    probability is evaluated per step. Each truncation is a rank-one downdate of the covariance,
+    kept as (gain, shrink) pairs: a step reads only the diagonal and the chosen column of the
+    pool, never an updated matrix. Arrays are (k, S) so every step works on contiguous rows.
+    h is clipped to [-1e3, 1e3] for the step's factor and truncation: Phi is exactly 0 / 1 there
+    in double precision, and a certain or done condition (h = +inf) then shifts nothing.
     """
-    mu = mu.copy()
-    count, k = mu.shape
-    rows = np.arange(count)
-    var = np.diagonal(sig, axis1=1, axis2=2).copy()
-    downdates = []  # (gain (M, k), shrink (M,)) per step: S -= shrink * gain gain^T
+    k, count = mean.shape
+    size = cov.shape[-1]
+    pool = cov.reshape(-1)
+    pick = np.ascontiguousarray(pick)
+    col_at = pos * size * size + pick * size  # (k, S): pool index of entry (i, 0) of each block
+    mu = np.array(mean, dtype=float)
+    var = np.take(pool, col_at + pick)  # (k, S) diagonal
+    cols = np.arange(count)
+    # First least likely condition from the row mask of minima: bit k-1-i flags condition i,
+    # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
+    bits = (1 << np.arange(k - 1, -1, -1))[:, None]
+    first_set = (k - 1 - np.floor(np.log2(np.maximum(np.arange(1 << k), 1)))).astype(np.intp)
+    downdates = []  # (gain (k, S), shrink (S,)) per step: S -= shrink * gain gain^T
     total = np.ones(count)
     for step in range(k):
-        h = _standardize(mu, var)
+        sd = np.sqrt(np.maximum(var, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h = np.fmin(mu / sd, np.inf)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
         # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
         # whichever is picked changes nothing (factor 1, zero shift and shrink).
-        j = np.argmin(h, axis=1)
-        hj, var_j = h[rows, j], var[rows, j]
-        finite = np.isfinite(hj)
-        hj_fin = np.where(finite, hj, 0.0)
-        log_pj = log_ndtr(hj_fin)
-        total = total * np.exp(np.where(finite, log_pj, np.where(hj > 0, 0.0, -np.inf)))
+        hj = h.min(axis=0)
+        j = first_set[np.sum((h == hj) * bits, axis=0)]
+        hj = np.clip(hj, -1e3, 1e3)
+        log_pj = log_ndtr(hj)
+        total *= np.exp(log_pj)
         if step == k - 1:  # nothing left to condition
             break
-        mills = np.exp(-0.5 * hj_fin**2 - _HALF_LOG_2PI - log_pj)
-        mills = np.where(finite, mills, 0.0)
-        sd_j = np.sqrt(np.maximum(var_j, 0.0))
-        shift = sd_j * mills  # truncated mean minus mean
-        shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
-        col = sig[rows, :, j]  # (M, k): S_.j, then the earlier downdates
+        mills = np.exp(-0.5 * hj**2 - _HALF_LOG_2PI - log_pj)
+        at = j * count + cols  # flat index of the chosen condition in (k, S)
+        var_j = np.take(var, at)
+        shift = np.take(sd, at) * mills  # truncated mean minus mean
+        shrink = var_j * (hj * mills + mills**2)  # variance removed by the truncation
+        col = np.take(pool, col_at + np.take(pick, at))  # (k, S): column j of each block
         for gain_t, shrink_t in downdates:
-            col = col - gain_t * gain_t[rows, j][:, None] * shrink_t[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
-        mu += gain * shift[:, None]
-        var -= gain * gain * shrink[:, None]
+            col -= gain_t * np.take(gain_t, at) * shrink_t
+        gain = col / np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
+        mu += gain * shift
+        var -= gain * gain * shrink
         downdates.append((gain, shrink))
-        mu[rows, j] = np.inf  # conditioned on: never the least likely again
+        np.put(mu, at, np.inf)  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
 
@@ -152,40 +168,37 @@ def _move_endpoints(a, b) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
+def _rot(v: np.ndarray) -> np.ndarray:
+    """(..., 2) vectors turned by +90 degrees: (x, y) -> (-y, x); cross(u, v) = rot(u) . v."""
+    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+
+
 def _conditions(a, b, c, d):
     """Conditions (7-10) for move a -> b and edge y = (c, d), all broadcastable (..., 2), as
-    functions of y that must be >= 0: values at the mean (4, ...) and gradients (4, ..., 4).
+    functions of y that must be >= 0: values at the mean (4, ...) and gradients (..., 4, 4)
+    (condition, then y = (c_x, c_y, d_x, d_y)).
 
     (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
     about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
     """
     move = b - a
-    zero = np.zeros(np.broadcast_shapes(c.shape, a.shape)[:-1])
-    values = np.stack(
-        [
-            cross(d - c, c - a),  # (I) a lies on the outer side of cd
-            cross(d - c, b - c),  # (II) b lies on the inner side
-            cross(move, c - a) + zero,  # (III) c left of ab
-            cross(move, a - d) + zero,  # (IV) d right of ab
-        ]
-    )
-    mx, my = move[..., 0] + zero, move[..., 1] + zero
-    a_x, a_y, b_x, b_y = a[..., 0] + zero, a[..., 1] + zero, b[..., 0] + zero, b[..., 1] + zero
-    c_x, c_y, d_x, d_y = c[..., 0] + zero, c[..., 1] + zero, d[..., 0] + zero, d[..., 1] + zero
-    grads = np.stack(
-        [
-            np.stack([a_y - d_y, d_x - a_x, c_y - a_y, a_x - c_x], axis=-1),
-            np.stack([d_y - b_y, b_x - d_x, b_y - c_y, c_x - b_x], axis=-1),
-            np.stack([-my, mx, zero, zero], axis=-1),
-            np.stack([zero, zero, my, -mx], axis=-1),
-        ]
-    )
+    batch = np.broadcast_shapes(a.shape, b.shape, c.shape, d.shape)[:-1]
+    values = np.empty((4, *batch))
+    values[0] = cross(d - c, c - a)  # (I) a lies on the outer side of cd
+    values[1] = cross(d - c, b - c)  # (II) b lies on the inner side
+    values[2] = cross(move, c - a)  # (III) c left of ab
+    values[3] = cross(move, a - d)  # (IV) d right of ab
+    grads = np.zeros((*batch, 4, 4))
+    grads[..., 0, :2], grads[..., 0, 2:] = _rot(d - a), _rot(a - c)
+    grads[..., 1, :2], grads[..., 1, 2:] = _rot(b - d), _rot(c - b)
+    grads[..., 2, :2] = _rot(move)
+    grads[..., 3, 2:] = -_rot(move)
     return values, grads
 
 
 def _collision_conditions(a, b, means):
     """``_conditions`` for every pair of moves a, b (K, 2) and edge means (E, 4): values
-    (4, K, E), gradients (4, K, E, 4) and the zero-length moves (K, 1)."""
+    (4, K, E), gradients (K, E, 4, 4) and the zero-length moves (K, 1)."""
     a, b = _move_endpoints(a, b)
     values, grads = _conditions(a[:, None], b[:, None], means[None, :, :2], means[None, :, 2:])
     still = np.linalg.norm(b - a, axis=-1)[:, None] == 0.0
@@ -201,8 +214,7 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     values, grads, still = _collision_conditions(a, b, means)
-    g = np.moveaxis(grads, 0, 2)  # (K, E, 4 conditions, 4)
-    cov_g = np.moveaxis(g @ covs @ np.swapaxes(g, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
+    cov_g = np.moveaxis(grads @ covs @ np.swapaxes(grads, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
     var = np.stack([cov_g[i, i] for i in range(4)])
     if method == "univariate":  # eq. (26)
         p = np.prod(ndtr(_standardize(values, var)), axis=0)
@@ -225,55 +237,57 @@ _EVENT_PICK = np.array([[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 6, 7], [0, 1, 2, 3, 8, 
 PRUNE_BELOW = 1e-12
 
 
+def _likely(values: np.ndarray, var: np.ndarray, h_min: float) -> np.ndarray:
+    """Whether Phi(values / sd) > PRUNE_BELOW, as the equivalent values >= h_min sd with
+    h_min = Phi^-1(PRUNE_BELOW): no division and no Phi. Zero variance: values >= 0."""
+    return values >= h_min * np.sqrt(np.maximum(var, 0.0))
+
+
 def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
     stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
     conditioning, so the dependence between where the edge lies and how it is tilted is kept.
 
     Pruning (Sec. IV-F): an event is no likelier than its least likely single condition; events
-    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 7 x 7
-    covariance of the four collision and three friction conditions is formed once per surviving
-    (move, edge) pair, and all surviving events go through one batched orthant evaluation.
+    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 9 x 9
+    covariance of the four collision and five signed friction conditions is formed once per
+    surviving (move, edge) pair; all surviving events go through one batched orthant evaluation
+    that reads their 6 x 6 blocks from it.
     """
     means, covs = shape.edge_gaussians()
     a, b = _move_endpoints(a, b)
+    # PRUNE_BELOW <= 0 keeps every event with a non-zero bound (h_min finite keeps 0 * h_min = 0).
+    h_min = max(float(ndtri(PRUNE_BELOW)), -1e300) if PRUNE_BELOW > 0 else -1e300
     w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
     fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
     fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 5)
     fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
-    p_fric = ndtr(_standardize(fric_mean, fric_var))
-    event_bound = np.min(p_fric[:, _EVENT_PICK[:, 4:] - 4], axis=2).T  # (3, E)
+    event_ok = np.all(_likely(fric_mean, fric_var, h_min)[:, _EVENT_PICK[:, 4:] - 4], axis=2).T
     # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
-    # +-perp(b - a), so their variances need only the 2 x 2 endpoint blocks.
+    # +-rot(b - a), so their means and variances are (K, 2) x (2, E) and (K, 4) x (4, E) products.
     move = b - a
-    perp = np.stack([-move[:, 1], move[:, 0]], axis=1)  # (K, 2)
-    lin_values = np.stack(
-        [
-            cross(move[:, None], means[None, :, :2] - a[:, None]),
-            cross(move[:, None], a[:, None] - means[None, :, 2:]),
-        ]
-    )
-    lin_var = np.stack(
-        [np.einsum("kd,edf,kf->ke", perp, covs[:, i : i + 2, i : i + 2], perp) for i in (0, 2)]
-    )
+    perp = _rot(move)  # (K, 2)
+    along = np.sum(perp * a, axis=1)[:, None]  # rot(move) . a
+    outer = (perp[:, :, None] * perp[:, None, :]).reshape(-1, 4)  # (K, 4)
     still = (np.linalg.norm(move, axis=1) == 0.0)[:, None]
-    keep = (np.min(ndtr(_standardize(lin_values, lin_var)), axis=0) > PRUNE_BELOW) & ~still
-    keep &= event_bound.max(axis=0)[None] > PRUNE_BELOW
+    keep = ~still & event_ok.any(axis=0)[None]
+    keep &= _likely(perp @ means[:, :2].T - along, outer @ covs[:, :2, :2].reshape(-1, 4).T, h_min)
+    keep &= _likely(along - perp @ means[:, 2:].T, outer @ covs[:, 2:, 2:].reshape(-1, 4).T, h_min)
     k_idx, e_idx = np.nonzero(keep)
     # Second pass on the survivors: the 9 x 9 covariance of all conditions, once per pair.
     values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
     count = len(k_idx)
-    g9 = np.concatenate([np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (count, 5, 4))], 1)
-    v9 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 9)
+    g9 = np.empty((count, 9, 4))
+    g9[:, :4], g9[:, 4:] = grads, fric_grad
     c9 = g9 @ covs[e_idx] @ np.swapaxes(g9, 1, 2)  # (M, 9, 9)
-    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4]
-    bound = np.min(ndtr(_standardize(values.T, var)), axis=1)  # (M,)
-    slot, pos = np.nonzero(np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW)
-    pick = _EVENT_PICK[slot]  # (S, 6) rows of each live event
-    v6 = np.take(v9, (pos * 9)[:, None] + pick)
-    c6 = np.take(c9, (pos * 81)[:, None, None] + pick[:, :, None] * 9 + pick[:, None, :])
+    v9 = np.concatenate([values, fric_mean[e_idx].T])  # (9, M)
+    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4].T
+    alive = _likely(values, var, h_min).all(axis=0)[None] & event_ok[:, e_idx]  # (3, M)
+    slot, pos = np.nonzero(alive)
+    pick = _EVENT_PICK[slot].T  # (6, S) rows of each live event among the 9
     out = np.zeros((3, len(a), len(means)))
-    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
+    mean6 = np.take(v9, pick * count + pos)  # (6, S)
+    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(mean6, c9, pos, pick)
     return out
 
 
@@ -405,20 +419,25 @@ def dock_probabilities(
     stop_vertex = np.zeros((len(p_c), n))
     if compliant:
         trans = _vertex_transitions(shape, terms)
-        count = n + n_edges
-        # feature f: vertex i at 2i, edge j at 2j + 1 (left to right along the polyline)
-        a_left, b_left = np.zeros((len(p_c), count)), np.ones((len(p_c), count))
-        a_right, b_right = a_left.copy(), b_left.copy()
-        a_left[:, 1::2], a_right[:, 1::2] = events[1], events[2]
-        b_left[:, 0::2], b_right[:, 0::2] = trans["cont_left"], trans["cont_right"]
-        slide_left = solve_chain(a_left, b_left, shape.closed)  # P(L_F), eq. (21)
-        slide_right = solve_chain(a_right[:, ::-1], b_right[:, ::-1], shape.closed)[:, ::-1]
+        # Eq. (21) along the edges: a left slide on edge j comes from a contact there or from a
+        # left slide on the next edge that continues over their common vertex; mirror image on
+        # the right. Both chains go through one solve_chain call (the right one reversed).
+        first, last = shape.edges[:, 0], shape.edges[:, 1]
+        count = len(p_c)
+        chains = solve_chain(
+            np.concatenate([events[1], events[2][:, ::-1]]),
+            np.concatenate(
+                [
+                    np.broadcast_to(trans["cont_left"][last], (count, n_edges)),
+                    np.broadcast_to(trans["cont_right"][first][::-1], (count, n_edges)),
+                ]
+            ),
+            shape.closed,
+        )
         # eq. (20) at vertices: arrive by a left slide from r(v) or a right slide from l(v)
-        from_right = np.roll(slide_left, -1, axis=1)[:, 0::2]
-        from_left = np.roll(slide_right, 1, axis=1)[:, 0::2]
-        if not shape.closed:  # the ends have no neighbour on one side
-            from_right[:, -1] = 0.0
-            from_left[:, 0] = 0.0
+        from_right, from_left = np.zeros((count, n)), np.zeros((count, n))
+        from_right[:, first] = chains[:count]  # P(L) on r(v)
+        from_left[:, last] = chains[count:, ::-1]  # P(R) on l(v)
         stop_vertex = from_right * trans["stick_left"] + from_left * trans["stick_right"]
     clear = np.ones(len(p_c)) if p_clear is None else np.asarray(p_clear, dtype=float)
     stop_vertex, stop_edge = stop_vertex * clear[:, None], stop_edge * clear[:, None]

@@ -55,7 +55,7 @@ def _accuracy(args, rng):
         hit = simulate.first_hits(c, d, a[k], b[k])[0]
         lhs[k] = hit.mean()
         values, grads, _ = probsim._collision_conditions(a[k], b[k], means[k : k + 1])
-        lin = values[:, 0, 0][None] + (y - means[k]) @ grads[:, 0, 0].T
+        lin = values[:, 0, 0][None] + (y - means[k]) @ grads[0, 0].T
         rhs[k] = np.mean(np.all(lin >= 0, axis=1))
         for m in probsim.METHODS:
             est[m][k] = probsim.segment_collision_probabilities(
@@ -116,7 +116,7 @@ def _speed(args, rng):
     # The same quadrants through our bvn and through scipy: the collision pairs of every site.
     means, covs = shape.edge_gaussians()
     values, grads, _ = probsim._collision_conditions(starts, ends, means)
-    cov_g = np.einsum("iked,edf,jkef->ijke", grads, covs, grads)
+    cov_g = np.einsum("keid,edf,kejf->ijke", grads, covs, grads)
     quads = []
     for i, j in ((0, 2), (1, 3)):
         sd_i, sd_j = np.sqrt(cov_g[i, i]), np.sqrt(cov_g[j, j])
