@@ -36,7 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr, ndtr, ndtri
+from scipy.special import ndtr, ndtri
 
 from . import bvn
 from .shape import GaussianShape
@@ -106,7 +106,7 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
 
     The least likely condition is the one with the smallest standardized mean h, so only its
     probability is evaluated per step. Each truncation is a rank-one downdate of the covariance,
-    kept as (gain, shrink) pairs: a step reads only the diagonal and the chosen column of the
+    kept as (gain, shrink * gain) pairs: a step reads only the diagonal and the chosen column of the
     pool, never an updated matrix. Arrays are (k, S) so every step works on contiguous rows.
     h is clipped to [-1e3, 1e3] for the step's factor and truncation: Phi is exactly 0 / 1 there
     in double precision, and a certain or done condition (h = +inf) then shifts nothing.
@@ -123,7 +123,7 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
     # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
     bits = (1 << np.arange(k - 1, -1, -1))[:, None]
     first_set = (k - 1 - np.floor(np.log2(np.maximum(np.arange(1 << k), 1)))).astype(np.intp)
-    downdates = []  # (gain (k, S), shrink (S,)) per step: S -= shrink * gain gain^T
+    downdates = []  # (gain, shrink * gain), both (k, S), per step: S -= shrink * gain gain^T
     total = np.ones(count)
     for step in range(k):
         sd = np.sqrt(np.maximum(var, 0.0))
@@ -134,22 +134,24 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
         hj = h.min(axis=0)
         j = first_set[np.sum((h == hj) * bits, axis=0)]
         hj = np.clip(hj, -1e3, 1e3)
-        log_pj = log_ndtr(hj)
-        total *= np.exp(log_pj)
+        p_j = ndtr(hj)
+        total *= p_j
         if step == k - 1:  # nothing left to condition
             break
-        mills = np.exp(-0.5 * hj**2 - _HALF_LOG_2PI - log_pj)
+        # Inverse Mills ratio phi / Phi; Phi underflows only where total is already < 1e-300.
+        mills = np.exp(-0.5 * hj * hj - _HALF_LOG_2PI) / np.maximum(p_j, 1e-300)
         at = j * count + cols  # flat index of the chosen condition in (k, S)
         var_j = np.take(var, at)
         shift = np.take(sd, at) * mills  # truncated mean minus mean
-        shrink = var_j * (hj * mills + mills**2)  # variance removed by the truncation
+        shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
         col = np.take(pool, col_at + np.take(pick, at))  # (k, S): column j of each block
-        for gain_t, shrink_t in downdates:
-            col -= gain_t * np.take(gain_t, at) * shrink_t
+        for gain_t, scaled_t in downdates:
+            col -= scaled_t * np.take(gain_t, at)
         gain = col / np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
         mu += gain * shift
-        var -= gain * gain * shrink
-        downdates.append((gain, shrink))
+        scaled = gain * shrink
+        var -= gain * scaled
+        downdates.append((gain, scaled))
         np.put(mu, at, np.inf)  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
@@ -370,15 +372,18 @@ def _edge_contact_split(terms: dict) -> np.ndarray:
 def solve_chain(a: np.ndarray, b: np.ndarray, cyclic: bool) -> np.ndarray:
     """x_f = a_f + b_f x_{f+1} over the last axis (eqs. 21-22 along the feature sequence).
 
+    ``b`` broadcasts against ``a`` (e.g. one coefficient row shared by many right-hand sides).
     Open chains end with x_F = 0; cyclic chains wrap (x_F = x_0) and are solved exactly via
     x_f = y_f + (prod_{i >= f} b_i) x_0. Recursive doubling: O(F log F) vectorized work,
     ceil(log2 F) numpy steps and no Python loop over features.
     """
-    x, prod = a.astype(float).copy(), b.astype(float).copy()
-    size = a.shape[-1]
+    b = np.asarray(b, dtype=float)
+    x = np.array(np.broadcast_to(a, np.broadcast_shapes(np.shape(a), b.shape)), dtype=float)
+    prod = b.copy()
+    size = x.shape[-1]
     step = 1
     while step < size:
-        x[..., : size - step] = x[..., : size - step] + prod[..., : size - step] * x[..., step:]
+        x[..., : size - step] += prod[..., : size - step] * x[..., step:]
         prod[..., : size - step] = prod[..., : size - step] * prod[..., step:]
         step *= 2
     if cyclic:
@@ -404,7 +409,7 @@ def dock_probabilities(
     """
     _check_shape(shape)
     unit(load, "load")
-    n, n_edges = shape.n_vertices, shape.n_edges
+    n = shape.n_vertices
     terms = _edge_slip_terms(shape, load)
     if method == "sequential":
         events = _contact_events_sequential(starts, ends, shape, load)  # (3, K, E)
@@ -425,19 +430,14 @@ def dock_probabilities(
         first, last = shape.edges[:, 0], shape.edges[:, 1]
         count = len(p_c)
         chains = solve_chain(
-            np.concatenate([events[1], events[2][:, ::-1]]),
-            np.concatenate(
-                [
-                    np.broadcast_to(trans["cont_left"][last], (count, n_edges)),
-                    np.broadcast_to(trans["cont_right"][first][::-1], (count, n_edges)),
-                ]
-            ),
+            np.stack([events[1], events[2][:, ::-1]]),  # (2, K, E)
+            np.stack([trans["cont_left"][last], trans["cont_right"][first][::-1]])[:, None],
             shape.closed,
         )
         # eq. (20) at vertices: arrive by a left slide from r(v) or a right slide from l(v)
         from_right, from_left = np.zeros((count, n)), np.zeros((count, n))
-        from_right[:, first] = chains[:count]  # P(L) on r(v)
-        from_left[:, last] = chains[count:, ::-1]  # P(R) on l(v)
+        from_right[:, first] = chains[0]  # P(L) on r(v)
+        from_left[:, last] = chains[1][:, ::-1]  # P(R) on l(v)
         stop_vertex = from_right * trans["stick_left"] + from_left * trans["stick_right"]
     clear = np.ones(len(p_c)) if p_clear is None else np.asarray(p_clear, dtype=float)
     stop_vertex, stop_edge = stop_vertex * clear[:, None], stop_edge * clear[:, None]
