@@ -106,7 +106,7 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
 
     The least likely condition is the one with the smallest standardized mean h, so only its
     probability is evaluated per step. Each truncation is a rank-one downdate of the covariance,
-    kept as (gain, shrink * gain) pairs: a step reads only the diagonal and the chosen column of the
+    kept as (gain, shrink) pairs: a step reads only the diagonal and the chosen column of the
     pool, never an updated matrix. Arrays are (k, S) so every step works on contiguous rows.
     h is clipped to [-1e3, 1e3] for the step's factor and truncation: Phi is exactly 0 / 1 there
     in double precision, and a certain or done condition (h = +inf) then shifts nothing.
@@ -121,18 +121,22 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
     cols = np.arange(count)
     # First least likely condition from the row mask of minima: bit k-1-i flags condition i,
     # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
-    bits = (1 << np.arange(k - 1, -1, -1))[:, None]
+    bits = (1 << np.arange(k - 1, -1, -1))[:, None].astype(np.uint16)  # k <= 16
     first_set = (k - 1 - np.floor(np.log2(np.maximum(np.arange(1 << k), 1)))).astype(np.intp)
-    downdates = []  # (gain, shrink * gain), both (k, S), per step: S -= shrink * gain gain^T
+    # Work buffers reused by every step: fewer fresh temporaries, fewer page faults.
+    sd, h, tmp = np.empty_like(mu), np.empty_like(mu), np.empty_like(mu)
+    index, minimal = np.empty((k, count), dtype=np.intp), np.empty((k, count), dtype=bool)
+    downdates = []  # (gain (k, S), shrink (S,)) per step: S -= shrink * gain gain^T
     total = np.ones(count)
     for step in range(k):
-        sd = np.sqrt(np.maximum(var, 0.0))
+        np.sqrt(np.maximum(var, 0.0, out=sd), out=sd)
         with np.errstate(divide="ignore", invalid="ignore"):
-            h = np.fmin(mu / sd, np.inf)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
+            np.divide(mu, sd, out=h)
+        np.fmin(h, np.inf, out=h)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
         # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
         # whichever is picked changes nothing (factor 1, zero shift and shrink).
         hj = h.min(axis=0)
-        j = first_set[np.sum((h == hj) * bits, axis=0)]
+        j = first_set[np.sum(np.equal(h, hj, out=minimal) * bits, axis=0)]
         hj = np.clip(hj, -1e3, 1e3)
         p_j = ndtr(hj)
         total *= p_j
@@ -144,14 +148,15 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
         var_j = np.take(var, at)
         shift = np.take(sd, at) * mills  # truncated mean minus mean
         shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
-        col = np.take(pool, col_at + np.take(pick, at))  # (k, S): column j of each block
-        for gain_t, scaled_t in downdates:
-            col -= scaled_t * np.take(gain_t, at)
-        gain = col / np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
-        mu += gain * shift
-        scaled = gain * shrink
-        var -= gain * scaled
-        downdates.append((gain, scaled))
+        np.add(col_at, np.take(pick, at), out=index)
+        gain = np.take(pool, index)  # (k, S): column j of each block
+        for gain_t, shrink_t in downdates:
+            gain -= np.multiply(gain_t, np.take(gain_t, at) * shrink_t, out=tmp)
+        gain /= np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
+        mu += np.multiply(gain, shift, out=tmp)
+        np.multiply(gain, shrink, out=tmp)
+        var -= np.multiply(gain, tmp, out=tmp)
+        downdates.append((gain, shrink))
         np.put(mu, at, np.inf)  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
