@@ -93,16 +93,24 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
     flat_mean = mean.reshape(k, -1)  # (k, M)
     flat_cov = np.moveaxis(np.asarray(cov, dtype=float).reshape(k, k, -1), -1, 0)  # (M, k, k)
     count = flat_mean.shape[1]
-    pick = np.broadcast_to(np.arange(k)[:, None], (k, count))
-    return _orthant_rows(flat_mean, flat_cov, np.arange(count), pick).reshape(batch)
+    col_at = np.arange(count) * (k * k) + np.arange(k)[:, None] * k  # entry (i, 0) of each block
+
+    def column_at(at, out):  # entry (i, j) of each block
+        np.add(col_at, at // count, out=out)
+
+    pool = flat_cov.reshape(-1)
+    var = np.take(pool, col_at + np.arange(k)[:, None])
+    return _orthant_rows(flat_mean.copy(), var, pool, column_at).reshape(batch)
 
 
-def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.ndarray):
-    """``positive_orthant_sequential`` for S orthants whose covariances are sub-blocks of a pool.
+def _orthant_rows(mu: np.ndarray, var: np.ndarray, pool: np.ndarray, column_at) -> np.ndarray:
+    """``positive_orthant_sequential`` for S orthants whose covariance entries live in a pool.
 
-    Orthant r has mean ``mean[:, r]`` (mean is (k, S)) and covariance ``cov[pos[r]][p][:, p]``
-    with p = ``pick[:, r]`` (pick (k, S) indexes the pool cov (P, K, K)), so events sharing
-    conditions need no copies of their blocks. Returns (S,).
+    ``mu``, ``var`` (k, S): means and variances, used as work arrays (overwritten). ``pool`` is a
+    flat array holding the entries of every covariance, and ``column_at(at, out)`` writes into
+    ``out`` (k, S) the pool indices of the column of condition j, where ``at`` (S,) is the flat
+    index j * S + r of the chosen condition of orthant r. Orthants sharing entries (events of
+    one move and edge) thus need no copies of their blocks. Returns (S,).
 
     The least likely condition is the one with the smallest standardized mean h, so only its
     probability is evaluated per step. Each truncation is a rank-one downdate of the covariance,
@@ -111,13 +119,7 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
     h is clipped to [-1e3, 1e3] for the step's factor and truncation: Phi is exactly 0 / 1 there
     in double precision, and a certain or done condition (h = +inf) then shifts nothing.
     """
-    k, count = mean.shape
-    size = cov.shape[-1]
-    pool = cov.reshape(-1)
-    pick = np.ascontiguousarray(pick)
-    col_at = pos * size * size + pick * size  # (k, S): pool index of entry (i, 0) of each block
-    mu = np.array(mean, dtype=float)
-    var = np.take(pool, col_at + pick)  # (k, S) diagonal
+    k, count = mu.shape
     cols = np.arange(count)
     # First least likely condition from the row mask of minima: bit k-1-i flags condition i,
     # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
@@ -148,8 +150,8 @@ def _orthant_rows(mean: np.ndarray, cov: np.ndarray, pos: np.ndarray, pick: np.n
         var_j = np.take(var, at)
         shift = np.take(sd, at) * mills  # truncated mean minus mean
         shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
-        np.add(col_at, np.take(pick, at), out=index)
-        gain = np.take(pool, index)  # (k, S): column j of each block
+        column_at(at, index)
+        gain = np.take(pool, index)  # (k, S): column j of each covariance
         for gain_t, shrink_t in downdates:
             gain -= np.multiply(gain_t, np.take(gain_t, at) * shrink_t, out=tmp)
         gain /= np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
@@ -250,7 +252,7 @@ def _likely(values: np.ndarray, var: np.ndarray, h_min: float) -> np.ndarray:
     return values >= h_min * np.sqrt(np.maximum(var, 0.0))
 
 
-def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
+def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) -> np.ndarray:
     """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
     stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
     conditioning, so the dependence between where the edge lies and how it is tilted is kept.
@@ -259,16 +261,16 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 9 x 9
     covariance of the four collision and five signed friction conditions is formed once per
     surviving (move, edge) pair; all surviving events go through one batched orthant evaluation
-    that reads their 6 x 6 blocks from it.
+    that reads their 6 x 6 blocks from it. ``means``, ``covs``: ``shape.edge_gaussians()``.
     """
-    means, covs = shape.edge_gaussians()
     a, b = _move_endpoints(a, b)
     # PRUNE_BELOW <= 0 keeps every event with a non-zero bound (h_min finite keeps 0 * h_min = 0).
     h_min = max(float(ndtri(PRUNE_BELOW)), -1e300) if PRUNE_BELOW > 0 else -1e300
     w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
     fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
     fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 5)
-    fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
+    fric_cov = fric_grad @ covs @ fric_grad.T  # (E, 5, 5)
+    fric_var = np.diagonal(fric_cov, axis1=1, axis2=2)
     event_ok = np.all(_likely(fric_mean, fric_var, h_min)[:, _EVENT_PICK[:, 4:] - 4], axis=2).T
     # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
     # +-rot(b - a), so their means and variances are (K, 2) x (2, E) and (K, 4) x (4, E) products.
@@ -281,20 +283,36 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
     keep &= _likely(perp @ means[:, :2].T - along, outer @ covs[:, :2, :2].reshape(-1, 4).T, h_min)
     keep &= _likely(along - perp @ means[:, 2:].T, outer @ covs[:, 2:, 2:].reshape(-1, 4).T, h_min)
     k_idx, e_idx = np.nonzero(keep)
-    # Second pass on the survivors: the 9 x 9 covariance of all conditions, once per pair.
+    # Second pass on the survivors: the covariance of the four collision conditions with all
+    # nine, once per pair, and of the friction conditions with each other, once per edge.
     values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
     count = len(k_idx)
-    g9 = np.empty((count, 9, 4))
-    g9[:, :4], g9[:, 4:] = grads, fric_grad
-    c9 = g9 @ covs[e_idx] @ np.swapaxes(g9, 1, 2)  # (M, 9, 9)
-    v9 = np.concatenate([values, fric_mean[e_idx].T])  # (9, M)
-    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4].T
+    g9t = np.empty((count, 4, 9))  # gradients of the nine conditions as columns
+    g9t[:, :, :4], g9t[:, :, 4:] = np.swapaxes(grads, 1, 2), fric_grad.T
+    pool = np.empty(count * 36 + fric_cov.size)  # the pairs' (4, 9) blocks, then fric_cov
+    pair = np.matmul(grads @ covs[e_idx], g9t, out=pool[: count * 36].reshape(count, 4, 9))
+    pool[count * 36 :] = fric_cov.ravel()
+    var = np.diagonal(pair[:, :, :4], axis1=1, axis2=2).T  # (4, M)
     alive = _likely(values, var, h_min).all(axis=0)[None] & event_ok[:, e_idx]  # (3, M)
     slot, pos = np.nonzero(alive)
     pick = _EVENT_PICK[slot].T  # (6, S) rows of each live event among the 9
-    out = np.zeros((3, len(a), len(means)))
+    v9 = np.concatenate([values, fric_mean[e_idx].T])  # (9, M)
     mean6 = np.take(v9, pick * count + pos)  # (6, S)
-    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(mean6, c9, pos, pick)
+    del values, grads, g9t, v9  # lower the peak memory of the orthant (fewer page faults)
+    # Pool index of entry (i, j) of an event: i < 4: pair[p, i, pick_j]; i >= 4 (friction
+    # condition f): pair[p, pick_j, f] if pick_j < 4, else fric_cov[e, f - 4, pick_j - 4].
+    at_pair, f = pos * 36, pick[4:]
+    at_fric = count * 36 + e_idx[pos] * 25 + (f - 4) * 5 - 4
+    rows = at_pair + np.arange(4)[:, None] * 9  # (4, S): entry (i, 0), i < 4
+
+    def column_at(at, out):
+        pick_j = np.take(pick, at)
+        np.add(rows, pick_j, out=out[:4])
+        out[4:] = np.where(pick_j < 4, at_pair + f + 9 * pick_j, at_fric + pick_j)
+
+    var6 = np.take(pool, np.concatenate([rows + np.arange(4)[:, None], at_fric + f]))
+    out = np.zeros((3, len(a), len(means)))
+    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(mean6, var6, pool, column_at)
     return out
 
 
@@ -305,17 +323,17 @@ def collision_probabilities(a, b, shape: GaussianShape, method: str = "bivariate
     return segment_collision_probabilities(a, b, means, covs, method)[0]
 
 
-def _edge_slip_terms(shape: GaussianShape, load) -> dict:
-    """Gaussian moments of the edge functionals wL.t, wR.t, wN.t and of adjacent-edge pairs."""
+def _edge_slip_terms(shape: GaussianShape, load, means, covs) -> dict:
+    """Gaussian moments of the edge functionals wL.t, wR.t, wN.t (t = d - c) from the edge
+    Gaussians ``means`` (E, 4), ``covs`` (E, 4, 4), and the basis of t for adjacent-edge pairs."""
     w = friction_functionals(load, shape.friction)  # (3, 2)
+    grad = np.concatenate([-w, w], axis=1)  # (3, 4): gradient of w . (d - c) in (c, d)
     rows = shape.edge_rows()
-    basis_t = shape.basis[rows[:, 2:]] - shape.basis[rows[:, :2]]  # (E, 2, m)
-    mean_t = shape.mean[rows[:, 2:]] - shape.mean[rows[:, :2]]  # (E, 2)
-    f_basis = np.einsum("kj,ejm->ekm", w, basis_t)  # (E, 3, m): functional k of edge e
     return {
-        "mean": mean_t @ w.T,  # (E, 3)
-        "cov": f_basis @ np.swapaxes(f_basis, 1, 2),  # (E, 3, 3) within an edge
-        "basis": f_basis,
+        "mean": (means[:, 2:] - means[:, :2]) @ w.T,  # (E, 3)
+        "cov": grad @ covs @ grad.T,  # (E, 3, 3) within an edge
+        "w": w,
+        "basis_t": shape.basis[rows[:, 2:]] - shape.basis[rows[:, :2]],  # (E, 2, m)
     }
 
 
@@ -325,8 +343,9 @@ def _vertex_transitions(shape: GaussianShape, terms: dict):
     _, left, right = edge_index_arrays(n, shape.closed)
     inner = (left >= 0) & (right >= 0)
     el, er = left[inner], right[inner]
-    mean, cov, fb = terms["mean"], terms["cov"], terms["basis"]
-    cross_cov = fb[el] @ np.swapaxes(fb[er], 1, 2)  # (V, 3, 3): functional i of l, j of r
+    mean, cov, w, basis_t = terms["mean"], terms["cov"], terms["w"], terms["basis_t"]
+    # (V, 3, 3): Cov(functional i of l, functional j of r) = w Cov(t_l, t_r) w^T
+    cross_cov = w @ (basis_t[el] @ np.swapaxes(basis_t[er], 1, 2)) @ w.T
     # Both slide directions at once: a left slide (row L_) arrives along r(v) = src and goes on
     # to l(v) = dst; a right slide (row R_) the other way round. cov_ds (2V, 3, 3) is
     # Cov(functional i of dst, functional j of src).
@@ -415,11 +434,11 @@ def dock_probabilities(
     _check_shape(shape)
     unit(load, "load")
     n = shape.n_vertices
-    terms = _edge_slip_terms(shape, load)
+    means, covs = shape.edge_gaussians()
+    terms = _edge_slip_terms(shape, load, means, covs)
     if method == "sequential":
-        events = _contact_events_sequential(starts, ends, shape, load)  # (3, K, E)
+        events = _contact_events_sequential(starts, ends, shape, load, means, covs)  # (3, K, E)
     else:
-        means, covs = shape.edge_gaussians()
         p_c = segment_collision_probabilities(starts, ends, means, covs, method)  # (K, E)
         events = p_c[None] * _edge_contact_split(terms).T[:, None, :]
     total = events.sum(axis=(0, 2))[None, :, None]
