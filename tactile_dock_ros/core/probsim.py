@@ -402,14 +402,17 @@ def solve_chain(a: np.ndarray, b: np.ndarray, cyclic: bool) -> np.ndarray:
     ceil(log2 F) numpy steps and no Python loop over features.
     """
     b = np.asarray(b, dtype=float)
-    x = np.array(np.broadcast_to(a, np.broadcast_shapes(np.shape(a), b.shape)), dtype=float)
-    prod = b.copy()
-    size = x.shape[-1]
+    shape = np.broadcast_shapes(np.shape(a), b.shape)
+    # Features first, so that every doubling step works on contiguous blocks.
+    x = np.moveaxis(np.broadcast_to(np.asarray(a, dtype=float), shape), -1, 0).copy()
+    prod = np.moveaxis(b, -1, 0).copy()
+    size = len(x)
     step = 1
     while step < size:
-        x[..., : size - step] += prod[..., : size - step] * x[..., step:]
-        prod[..., : size - step] = prod[..., : size - step] * prod[..., step:]
+        x[: size - step] += prod[: size - step] * x[step:]
+        prod[: size - step] = prod[: size - step] * prod[step:]
         step *= 2
+    x = np.moveaxis(x, 0, -1)
     if cyclic:
         tail = np.cumprod(b[..., ::-1], axis=-1)[..., ::-1]  # prod_{i >= f} b_i
         x0 = x[..., :1] / np.maximum(1.0 - tail[..., :1], 1e-300)
@@ -442,7 +445,7 @@ def dock_probabilities(
         p_c = segment_collision_probabilities(starts, ends, means, covs, method)  # (K, E)
         events = p_c[None] * _edge_contact_split(terms).T[:, None, :]
     total = events.sum(axis=(0, 2))[None, :, None]
-    events = np.where(total > 1.0, events / np.maximum(total, 1e-300), events)
+    events /= np.maximum(total, 1.0)  # scaled to sum to 1 where they sum to more
     p_c = events.sum(axis=0)
     stop_edge = events[0]
     stop_vertex = np.zeros((len(p_c), n))
