@@ -40,7 +40,7 @@ from scipy.special import ndtr, ndtri
 
 from . import bvn
 from .shape import GaussianShape
-from .simulate import cross, edge_index_arrays, friction_functionals, unit
+from .simulate import edge_index_arrays, friction_functionals, unit
 
 METHODS = ("bivariate", "univariate", "sequential")
 L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
@@ -130,36 +130,37 @@ def _orthant_rows(mu: np.ndarray, var: np.ndarray, pool: np.ndarray, column_at) 
     index, minimal = np.empty((k, count), dtype=np.intp), np.empty((k, count), dtype=bool)
     downdates = []  # (gain (k, S), shrink (S,)) per step: S -= shrink * gain gain^T
     total = np.ones(count)
-    for step in range(k):
-        np.sqrt(np.maximum(var, 0.0, out=sd), out=sd)
-        with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # h of zero-variance conditions
+        for step in range(k):
+            np.sqrt(np.maximum(var, 0.0, out=sd), out=sd)
             np.divide(mu, sd, out=h)
-        np.fmin(h, np.inf, out=h)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
-        # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
-        # whichever is picked changes nothing (factor 1, zero shift and shrink).
-        hj = h.min(axis=0)
-        j = first_set[np.sum(np.equal(h, hj, out=minimal) * bits, axis=0)]
-        hj = np.clip(hj, -1e3, 1e3)
-        p_j = ndtr(hj)
-        total *= p_j
-        if step == k - 1:  # nothing left to condition
-            break
-        # Inverse Mills ratio phi / Phi; Phi underflows only where total is already < 1e-300.
-        mills = np.exp(-0.5 * hj * hj - _HALF_LOG_2PI) / np.maximum(p_j, 1e-300)
-        at = j * count + cols  # flat index of the chosen condition in (k, S)
-        var_j = np.take(var, at)
-        shift = np.take(sd, at) * mills  # truncated mean minus mean
-        shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
-        column_at(at, index)
-        gain = np.take(pool, index)  # (k, S): column j of each covariance
-        for gain_t, shrink_t in downdates:
-            gain -= np.multiply(gain_t, np.take(gain_t, at) * shrink_t, out=tmp)
-        gain /= np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
-        mu += np.multiply(gain, shift, out=tmp)
-        np.multiply(gain, shrink, out=tmp)
-        var -= np.multiply(gain, tmp, out=tmp)
-        downdates.append((gain, shrink))
-        np.put(mu, at, np.inf)  # conditioned on: never the least likely again
+            np.fmin(h, np.inf, out=h)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
+            # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
+            # whichever is picked changes nothing (factor 1, zero shift and shrink).
+            hj = h.min(axis=0)
+            if step == k - 1:  # nothing left to condition
+                total *= ndtr(np.clip(hj, -1e3, 1e3))
+                break
+            j = first_set[np.sum(np.equal(h, hj, out=minimal) * bits, axis=0)]
+            hj = np.clip(hj, -1e3, 1e3)
+            p_j = ndtr(hj)
+            total *= p_j
+            # Inverse Mills ratio phi / Phi; Phi underflows only where total is already < 1e-300.
+            mills = np.exp(-0.5 * hj * hj - _HALF_LOG_2PI) / np.maximum(p_j, 1e-300)
+            at = j * count + cols  # flat index of the chosen condition in (k, S)
+            var_j = np.take(var, at)
+            shift = np.take(sd, at) * mills  # truncated mean minus mean
+            shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
+            column_at(at, index)
+            gain = np.take(pool, index)  # (k, S): column j of each covariance
+            for gain_t, shrink_t in downdates:
+                gain -= np.multiply(gain_t, np.take(gain_t, at) * shrink_t, out=tmp)
+            gain /= np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
+            mu += np.multiply(gain, shift, out=tmp)
+            np.multiply(gain, shrink, out=tmp)
+            var -= np.multiply(gain, tmp, out=tmp)
+            downdates.append((gain, shrink))
+            np.put(mu, at, np.inf)  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
 
@@ -190,18 +191,23 @@ def _conditions(a, b, c, d):
     (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
     about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
     """
-    move = b - a
     batch = np.broadcast_shapes(a.shape, b.shape, c.shape, d.shape)[:-1]
+    mx, my = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]  # move = b - a
+    tx, ty = d[..., 0] - c[..., 0], d[..., 1] - c[..., 1]  # edge direction d - c
+    cax, cay = c[..., 0] - a[..., 0], c[..., 1] - a[..., 1]  # c - a
+    bcx, bcy = b[..., 0] - c[..., 0], b[..., 1] - c[..., 1]  # b - c
+    adx, ady = a[..., 0] - d[..., 0], a[..., 1] - d[..., 1]  # a - d
+    bdx, bdy = b[..., 0] - d[..., 0], b[..., 1] - d[..., 1]  # b - d
     values = np.empty((4, *batch))
-    values[0] = cross(d - c, c - a)  # (I) a lies on the outer side of cd
-    values[1] = cross(d - c, b - c)  # (II) b lies on the inner side
-    values[2] = cross(move, c - a)  # (III) c left of ab
-    values[3] = cross(move, a - d)  # (IV) d right of ab
-    grads = np.zeros((*batch, 4, 4))
-    grads[..., 0, :2], grads[..., 0, 2:] = _rot(d - a), _rot(a - c)
-    grads[..., 1, :2], grads[..., 1, 2:] = _rot(b - d), _rot(c - b)
-    grads[..., 2, :2] = _rot(move)
-    grads[..., 3, 2:] = -_rot(move)
+    values[0] = tx * cay - ty * cax  # (I) cross(d - c, c - a): a on the outer side of cd
+    values[1] = tx * bcy - ty * bcx  # (II) cross(d - c, b - c): b on the inner side
+    values[2] = mx * cay - my * cax  # (III) cross(b - a, c - a): c left of ab
+    values[3] = mx * ady - my * adx  # (IV) cross(b - a, a - d): d right of ab
+    grads = np.zeros((*batch, 4, 4))  # rows: rot(d - a), rot(a - c); rot(b - d), rot(c - b); ...
+    grads[..., 0, 0], grads[..., 0, 1], grads[..., 0, 2], grads[..., 0, 3] = ady, -adx, cay, -cax
+    grads[..., 1, 0], grads[..., 1, 1], grads[..., 1, 2], grads[..., 1, 3] = -bdy, bdx, bcy, -bcx
+    grads[..., 2, 0], grads[..., 2, 1] = -my, mx  # rot(b - a), 0
+    grads[..., 3, 2], grads[..., 3, 3] = my, -mx  # 0, -rot(b - a)
     return values, grads
 
 
@@ -303,12 +309,12 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) ->
     # condition f): pair[p, pick_j, f] if pick_j < 4, else fric_cov[e, f - 4, pick_j - 4].
     at_pair, f = pos * 36, pick[4:]
     at_fric = count * 36 + e_idx[pos] * 25 + (f - 4) * 5 - 4
-    rows = at_pair + np.arange(4)[:, None] * 9  # (4, S): entry (i, 0), i < 4
+    rows, at_pair_f = at_pair + np.arange(4)[:, None] * 9, at_pair + f  # entries (i, 0), (j, f)
 
     def column_at(at, out):
         pick_j = np.take(pick, at)
         np.add(rows, pick_j, out=out[:4])
-        out[4:] = np.where(pick_j < 4, at_pair + f + 9 * pick_j, at_fric + pick_j)
+        np.copyto(out[4:], np.where(pick_j < 4, at_pair_f + 9 * pick_j, at_fric + pick_j))
 
     var6 = np.take(pool, np.concatenate([rows + np.arange(4)[:, None], at_fric + f]))
     out = np.zeros((3, len(a), len(means)))
