@@ -301,7 +301,7 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) ->
     var = np.diagonal(pair[:, :, :4], axis1=1, axis2=2).T  # (4, M)
     alive = _likely(values, var, h_min).all(axis=0)[None] & event_ok[:, e_idx]  # (3, M)
     slot, pos = np.nonzero(alive)
-    pick = _EVENT_PICK[slot].T  # (6, S) rows of each live event among the 9
+    pick = np.ascontiguousarray(_EVENT_PICK[slot].T)  # (6, S) rows of each event among the 9
     v9 = np.concatenate([values, fric_mean[e_idx].T])  # (9, M)
     mean6 = np.take(v9, pick * count + pos)  # (6, S)
     del values, grads, g9t, v9  # lower the peak memory of the orthant (fewer page faults)
