@@ -120,10 +120,12 @@ def _orthant_rows(mu: np.ndarray, var: np.ndarray, pool: np.ndarray, column_at) 
     in double precision, and a certain or done condition (h = +inf) then shifts nothing.
     """
     k, count = mu.shape
+    if not 0 < k <= 16:
+        raise ValueError(f"the orthant takes 1 to 16 conditions, got {k}")
     cols = np.arange(count)
     # First least likely condition from the row mask of minima: bit k-1-i flags condition i,
     # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
-    bits = (1 << np.arange(k - 1, -1, -1))[:, None].astype(np.uint16)  # k <= 16
+    bits = (1 << np.arange(k - 1, -1, -1))[:, None].astype(np.uint16)
     first_set = (k - 1 - np.floor(np.log2(np.maximum(np.arange(1 << k), 1)))).astype(np.intp)
     # Work buffers reused by every step: fewer fresh temporaries, fewer page faults.
     sd, h, tmp = np.empty_like(mu), np.empty_like(mu), np.empty_like(mu)
@@ -264,13 +266,15 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) ->
     conditioning, so the dependence between where the edge lies and how it is tilted is kept.
 
     Pruning (Sec. IV-F): an event is no likelier than its least likely single condition; events
-    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 9 x 9
-    covariance of the four collision and five signed friction conditions is formed once per
-    surviving (move, edge) pair; all surviving events go through one batched orthant evaluation
-    that reads their 6 x 6 blocks from it. ``means``, ``covs``: ``shape.edge_gaussians()``.
+    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). Bounds are
+    compared on standardized means (``_likely``). The covariances of the four collision
+    conditions with all nine (four collision, five signed friction) are formed once per
+    surviving (move, edge) pair, those among the friction conditions once per edge; all
+    surviving events go through one batched orthant evaluation that reads its 6 x 6 blocks from
+    this pool. ``means``, ``covs``: ``shape.edge_gaussians()``.
     """
     a, b = _move_endpoints(a, b)
-    # PRUNE_BELOW <= 0 keeps every event with a non-zero bound (h_min finite keeps 0 * h_min = 0).
+    # PRUNE_BELOW <= 0 keeps every event but those with an impossible condition (exactly 0).
     h_min = max(float(ndtri(PRUNE_BELOW)), -1e300) if PRUNE_BELOW > 0 else -1e300
     w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
     fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
