@@ -81,6 +81,17 @@ def test_rho_zero_factorizes_and_limits():
     assert np.allclose(bvn.quadrant(h, 0.3, 1 - 1e-12), ndtr(np.minimum(h, 0.3)), atol=1e-5)
 
 
+def test_limits_beyond_the_tail_cut_match_scipy():
+    """|h| or |k| beyond 8.5 skip the quadrature (univariate limit): still within 1e-16."""
+    limits = np.array(
+        [-40.0, -9.0, -8.5000001, -8.4999999, -7.0, 0.5, 7.0, 8.4999999, 8.5000001, 12.0]
+    )
+    h, k, r = np.meshgrid(limits, limits, [-0.999, -0.6, 0.0, 0.4, 0.95], indexing="ij")
+    ours = bvn.quadrant(h, k, r)
+    ref = np.array([_scipy_quadrant(*v) for v in zip(h.ravel(), k.ravel(), r.ravel(), strict=True)])
+    assert np.max(np.abs(ours.ravel() - ref)) <= 1e-16
+
+
 def test_infinite_limits():
     assert bvn.quadrant(np.inf, 0.5, 0.7) == pytest.approx(ndtr(0.5), abs=1e-15)
     assert bvn.quadrant(-0.2, np.inf, -0.7) == pytest.approx(ndtr(-0.2), abs=1e-15)

@@ -136,6 +136,10 @@ def test_solve_chain_matches_dense(cyclic):
         if cyclic:
             m[-1, 0] = -b[k, -1]
         assert np.allclose(m @ x[k], a[k])
+    # One coefficient row shared by several right-hand sides (broadcast) gives the same.
+    shared = probsim.solve_chain(a, b[:1], cyclic)
+    assert shared.shape == a.shape
+    assert np.allclose(shared, probsim.solve_chain(a, np.repeat(b[:1], 3, axis=0), cyclic))
 
 
 def test_closed_shape_matches_monte_carlo():
@@ -163,8 +167,38 @@ def test_pruning_loses_only_negligible_events(name, monkeypatch):
     mid = 0.5 * (mv[shape.edges[:, 0]] + mv[shape.edges[:, 1]])
     starts, ends = mid - 0.3 * prob.load, mid + 0.3 * prob.load
     pruned = probsim.dock_probabilities(shape, starts, ends, prob.load)
-    monkeypatch.setattr(probsim, "PRUNE_BELOW", -1.0)  # keeps every (move, edge, event)
+    # PRUNE_BELOW <= 0 keeps every (move, edge, event) except those with an impossible condition.
+    monkeypatch.setattr(probsim, "PRUNE_BELOW", -1.0)
     full = probsim.dock_probabilities(shape, starts, ends, prob.load)
     for fast, slow in zip(pruned, full, strict=True):
         assert np.max(np.abs(fast - slow)) <= 1e-9
     assert np.max(full[0]) > 0.5  # the comparison covers likely docks, not only zeros
+
+
+@pytest.mark.parametrize("name", ["sloper", "notch"])
+def test_pooled_event_orthants_match_explicit_blocks(name, monkeypatch):
+    """The events' 6 x 6 covariances read from the shared pair / edge pool (``column_at``) give
+    what the Mendell-Elston orthant gives on explicitly built blocks, for every (move, edge)."""
+    monkeypatch.setattr(probsim, "PRUNE_BELOW", -1.0)  # every event goes through the orthant
+    prob = problems.get(name)
+    shape = prob.prior
+    mv = shape.mean_vertices
+    mid = 0.5 * (mv[shape.edges[:, 0]] + mv[shape.edges[:, 1]])
+    starts, ends = mid - 0.3 * prob.load, mid + 0.3 * prob.load
+    means, covs = shape.edge_gaussians()
+    pooled = probsim._contact_events_sequential(starts, ends, shape, prob.load, means, covs)
+    values, grads = probsim._conditions(
+        starts[:, None], ends[:, None], means[None, :, :2], means[None, :, 2:]
+    )
+    w = simulate.friction_functionals(prob.load, shape.friction)[probsim._FRICTION_ROWS]
+    w = w * probsim._FRICTION_SIGNS[:, None]
+    fric_grad = np.concatenate([-w, w], axis=1)
+    g9 = np.concatenate([grads, np.broadcast_to(fric_grad, (*grads.shape[:2], 5, 4))], axis=2)
+    c9 = g9 @ covs[None] @ np.swapaxes(g9, 2, 3)  # (K, E, 9, 9)
+    fric_mean = ((means[:, 2:] - means[:, :2]) @ w.T).T[:, None]  # (5, 1, E)
+    v9 = np.concatenate([values, np.broadcast_to(fric_mean, (5, *values.shape[1:]))])
+    for slot, pick in enumerate(probsim._EVENT_PICK):
+        block = np.moveaxis(c9[:, :, pick][:, :, :, pick], (2, 3), (0, 1))  # (6, 6, K, E)
+        explicit = probsim.positive_orthant_sequential(v9[pick], block)
+        assert np.max(np.abs(pooled[slot] - explicit)) <= 1e-12
+    assert np.max(pooled) > 0.3  # likely events are covered, not only zeros

@@ -36,11 +36,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr, ndtr
+from scipy.special import ndtr, ndtri
 
 from . import bvn
 from .shape import GaussianShape
-from .simulate import cross, edge_index_arrays, friction_functionals, unit
+from .simulate import edge_index_arrays, friction_functionals, unit
 
 METHODS = ("bivariate", "univariate", "sequential")
 L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
@@ -90,51 +90,79 @@ def positive_orthant_sequential(mean: np.ndarray, cov: np.ndarray) -> np.ndarray
     """
     mean = np.asarray(mean, dtype=float)
     k, batch = len(mean), mean.shape[1:]
-    flat_mean = np.moveaxis(mean.reshape(k, -1), 0, -1)  # (M, k)
+    flat_mean = mean.reshape(k, -1)  # (k, M)
     flat_cov = np.moveaxis(np.asarray(cov, dtype=float).reshape(k, k, -1), -1, 0)  # (M, k, k)
-    return _orthant_rows(flat_mean, flat_cov).reshape(batch)
+    count = flat_mean.shape[1]
+    col_at = np.arange(count) * (k * k) + np.arange(k)[:, None] * k  # entry (i, 0) of each block
+
+    def column_at(at, out):  # entry (i, j) of each block
+        np.add(col_at, at // count, out=out)
+
+    pool = flat_cov.reshape(-1)
+    var = np.take(pool, col_at + np.arange(k)[:, None])
+    return _orthant_rows(flat_mean.copy(), var, pool, column_at).reshape(batch)
 
 
-def _orthant_rows(mu: np.ndarray, sig: np.ndarray) -> np.ndarray:
-    """``positive_orthant_sequential`` on rows: mean (M, k), cov (M, k, k) -> (M,).
+def _orthant_rows(mu: np.ndarray, var: np.ndarray, pool: np.ndarray, column_at) -> np.ndarray:
+    """``positive_orthant_sequential`` for S orthants whose covariance entries live in a pool.
 
-    The least likely condition is the one with the smallest standardized mean h (log_ndtr is
-    increasing), so only the chosen condition's probability is evaluated per step. Each
-    truncation is a rank-one downdate of the covariance, kept as (gain, shrink) pairs: a step
-    needs only the diagonal and the chosen column, never the whole updated matrix.
+    ``mu``, ``var`` (k, S): means and variances, used as work arrays (overwritten). ``pool`` is a
+    flat array holding the entries of every covariance, and ``column_at(at, out)`` writes into
+    ``out`` (k, S) the pool indices of the column of condition j, where ``at`` (S,) is the flat
+    index j * S + r of the chosen condition of orthant r. Orthants sharing entries (events of
+    one move and edge) thus need no copies of their blocks. Returns (S,).
+
+    The least likely condition is the one with the smallest standardized mean h, so only its
+    probability is evaluated per step. Each truncation is a rank-one downdate of the covariance,
+    kept as (gain, shrink) pairs: a step reads only the diagonal and the chosen column of the
+    pool, never an updated matrix. Arrays are (k, S) so every step works on contiguous rows.
+    h is clipped to [-1e3, 1e3] for the step's factor and truncation: Phi is exactly 0 / 1 there
+    in double precision, and a certain or done condition (h = +inf) then shifts nothing.
     """
-    mu = mu.copy()
-    count, k = mu.shape
-    rows = np.arange(count)
-    var = np.diagonal(sig, axis1=1, axis2=2).copy()
-    downdates = []  # (gain (M, k), shrink (M,)) per step: S -= shrink * gain gain^T
+    k, count = mu.shape
+    if not 0 < k <= 16:
+        raise ValueError(f"the orthant takes 1 to 16 conditions, got {k}")
+    cols = np.arange(count)
+    # First least likely condition from the row mask of minima: bit k-1-i flags condition i,
+    # so the highest set bit (a table lookup) is the first minimum, as argmin would pick.
+    bits = (1 << np.arange(k - 1, -1, -1))[:, None].astype(np.uint16)
+    first_set = (k - 1 - np.floor(np.log2(np.maximum(np.arange(1 << k), 1)))).astype(np.intp)
+    # Work buffers reused by every step: fewer fresh temporaries, fewer page faults.
+    sd, h, tmp = np.empty_like(mu), np.empty_like(mu), np.empty_like(mu)
+    index, minimal = np.empty((k, count), dtype=np.intp), np.empty((k, count), dtype=bool)
+    downdates = []  # (gain (k, S), shrink (S,)) per step: S -= shrink * gain gain^T
     total = np.ones(count)
-    for step in range(k):
-        h = _standardize(mu, var)
-        # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
-        # whichever is picked changes nothing (factor 1, zero shift and shrink).
-        j = np.argmin(h, axis=1)
-        hj, var_j = h[rows, j], var[rows, j]
-        finite = np.isfinite(hj)
-        hj_fin = np.where(finite, hj, 0.0)
-        log_pj = log_ndtr(hj_fin)
-        total = total * np.exp(np.where(finite, log_pj, np.where(hj > 0, 0.0, -np.inf)))
-        if step == k - 1:  # nothing left to condition
-            break
-        mills = np.exp(-0.5 * hj_fin**2 - _HALF_LOG_2PI - log_pj)
-        mills = np.where(finite, mills, 0.0)
-        sd_j = np.sqrt(np.maximum(var_j, 0.0))
-        shift = sd_j * mills  # truncated mean minus mean
-        shrink = var_j * (hj_fin * mills + mills**2)  # variance removed by the truncation
-        col = sig[rows, :, j]  # (M, k): S_.j, then the earlier downdates
-        for gain_t, shrink_t in downdates:
-            col = col - gain_t * gain_t[rows, j][:, None] * shrink_t[:, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gain = np.where(var_j[:, None] > 0, col / var_j[:, None], 0.0)
-        mu += gain * shift[:, None]
-        var -= gain * gain * shrink[:, None]
-        downdates.append((gain, shrink))
-        mu[rows, j] = np.inf  # conditioned on: never the least likely again
+    with np.errstate(divide="ignore", invalid="ignore"):  # h of zero-variance conditions
+        for step in range(k):
+            np.sqrt(np.maximum(var, 0.0, out=sd), out=sd)
+            np.divide(mu, sd, out=h)
+            np.fmin(h, np.inf, out=h)  # zero variance: +-inf by the sign of mu; 0 / 0 -> +inf
+            # Done conditions have mean +inf; when only they and certain (h = +inf) ones are left,
+            # whichever is picked changes nothing (factor 1, zero shift and shrink).
+            hj = h.min(axis=0)
+            if step == k - 1:  # nothing left to condition
+                total *= ndtr(np.clip(hj, -1e3, 1e3))
+                break
+            j = first_set[np.sum(np.equal(h, hj, out=minimal) * bits, axis=0)]
+            hj = np.clip(hj, -1e3, 1e3)
+            p_j = ndtr(hj)
+            total *= p_j
+            # Inverse Mills ratio phi / Phi; Phi underflows only where total is already < 1e-300.
+            mills = np.exp(-0.5 * hj * hj - _HALF_LOG_2PI) / np.maximum(p_j, 1e-300)
+            at = j * count + cols  # flat index of the chosen condition in (k, S)
+            var_j = np.take(var, at)
+            shift = np.take(sd, at) * mills  # truncated mean minus mean
+            shrink = var_j * mills * (hj + mills)  # variance removed by the truncation
+            column_at(at, index)
+            gain = np.take(pool, index)  # (k, S): column j of each covariance
+            for gain_t, shrink_t in downdates:
+                gain -= np.multiply(gain_t, np.take(gain_t, at) * shrink_t, out=tmp)
+            gain /= np.where(var_j > 0, var_j, np.inf)  # no regression on a constant
+            mu += np.multiply(gain, shift, out=tmp)
+            np.multiply(gain, shrink, out=tmp)
+            var -= np.multiply(gain, tmp, out=tmp)
+            downdates.append((gain, shrink))
+            np.put(mu, at, np.inf)  # conditioned on: never the least likely again
     return np.clip(total, 0.0, 1.0)
 
 
@@ -152,40 +180,42 @@ def _move_endpoints(a, b) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
+def _rot(v: np.ndarray) -> np.ndarray:
+    """(..., 2) vectors turned by +90 degrees: (x, y) -> (-y, x); cross(u, v) = rot(u) . v."""
+    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+
+
 def _conditions(a, b, c, d):
     """Conditions (7-10) for move a -> b and edge y = (c, d), all broadcastable (..., 2), as
-    functions of y that must be >= 0: values at the mean (4, ...) and gradients (4, ..., 4).
+    functions of y that must be >= 0: values at the mean (4, ...) and gradients (..., 4, 4)
+    (condition, then y = (c_x, c_y, d_x, d_y)).
 
     (I) s >= 0: cross(d - c, c - a), (II) s <= 1: cross(d - c, b - c) (bilinear in y, linearized
     about its mean), (III) t >= 0: cross(b - a, c - a), (IV) t <= 1: cross(b - a, a - d).
     """
-    move = b - a
-    zero = np.zeros(np.broadcast_shapes(c.shape, a.shape)[:-1])
-    values = np.stack(
-        [
-            cross(d - c, c - a),  # (I) a lies on the outer side of cd
-            cross(d - c, b - c),  # (II) b lies on the inner side
-            cross(move, c - a) + zero,  # (III) c left of ab
-            cross(move, a - d) + zero,  # (IV) d right of ab
-        ]
-    )
-    mx, my = move[..., 0] + zero, move[..., 1] + zero
-    a_x, a_y, b_x, b_y = a[..., 0] + zero, a[..., 1] + zero, b[..., 0] + zero, b[..., 1] + zero
-    c_x, c_y, d_x, d_y = c[..., 0] + zero, c[..., 1] + zero, d[..., 0] + zero, d[..., 1] + zero
-    grads = np.stack(
-        [
-            np.stack([a_y - d_y, d_x - a_x, c_y - a_y, a_x - c_x], axis=-1),
-            np.stack([d_y - b_y, b_x - d_x, b_y - c_y, c_x - b_x], axis=-1),
-            np.stack([-my, mx, zero, zero], axis=-1),
-            np.stack([zero, zero, my, -mx], axis=-1),
-        ]
-    )
+    batch = np.broadcast_shapes(a.shape, b.shape, c.shape, d.shape)[:-1]
+    mx, my = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]  # move = b - a
+    tx, ty = d[..., 0] - c[..., 0], d[..., 1] - c[..., 1]  # edge direction d - c
+    cax, cay = c[..., 0] - a[..., 0], c[..., 1] - a[..., 1]  # c - a
+    bcx, bcy = b[..., 0] - c[..., 0], b[..., 1] - c[..., 1]  # b - c
+    adx, ady = a[..., 0] - d[..., 0], a[..., 1] - d[..., 1]  # a - d
+    bdx, bdy = b[..., 0] - d[..., 0], b[..., 1] - d[..., 1]  # b - d
+    values = np.empty((4, *batch))
+    values[0] = tx * cay - ty * cax  # (I) cross(d - c, c - a): a on the outer side of cd
+    values[1] = tx * bcy - ty * bcx  # (II) cross(d - c, b - c): b on the inner side
+    values[2] = mx * cay - my * cax  # (III) cross(b - a, c - a): c left of ab
+    values[3] = mx * ady - my * adx  # (IV) cross(b - a, a - d): d right of ab
+    grads = np.zeros((*batch, 4, 4))  # rows: rot(d - a), rot(a - c); rot(b - d), rot(c - b); ...
+    grads[..., 0, 0], grads[..., 0, 1], grads[..., 0, 2], grads[..., 0, 3] = ady, -adx, cay, -cax
+    grads[..., 1, 0], grads[..., 1, 1], grads[..., 1, 2], grads[..., 1, 3] = -bdy, bdx, bcy, -bcx
+    grads[..., 2, 0], grads[..., 2, 1] = -my, mx  # rot(b - a), 0
+    grads[..., 3, 2], grads[..., 3, 3] = my, -mx  # 0, -rot(b - a)
     return values, grads
 
 
 def _collision_conditions(a, b, means):
     """``_conditions`` for every pair of moves a, b (K, 2) and edge means (E, 4): values
-    (4, K, E), gradients (4, K, E, 4) and the zero-length moves (K, 1)."""
+    (4, K, E), gradients (K, E, 4, 4) and the zero-length moves (K, 1)."""
     a, b = _move_endpoints(a, b)
     values, grads = _conditions(a[:, None], b[:, None], means[None, :, :2], means[None, :, 2:])
     still = np.linalg.norm(b - a, axis=-1)[:, None] == 0.0
@@ -201,8 +231,7 @@ def segment_collision_probabilities(a, b, means, covs, method: str = "bivariate"
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     values, grads, still = _collision_conditions(a, b, means)
-    g = np.moveaxis(grads, 0, 2)  # (K, E, 4 conditions, 4)
-    cov_g = np.moveaxis(g @ covs @ np.swapaxes(g, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
+    cov_g = np.moveaxis(grads @ covs @ np.swapaxes(grads, 2, 3), (2, 3), (0, 1))  # (4, 4, K, E)
     var = np.stack([cov_g[i, i] for i in range(4)])
     if method == "univariate":  # eq. (26)
         p = np.prod(ndtr(_standardize(values, var)), axis=0)
@@ -225,55 +254,75 @@ _EVENT_PICK = np.array([[0, 1, 2, 3, 4, 5], [0, 1, 2, 3, 6, 7], [0, 1, 2, 3, 8, 
 PRUNE_BELOW = 1e-12
 
 
-def _contact_events_sequential(a, b, shape: GaussianShape, load) -> np.ndarray:
+def _likely(values: np.ndarray, var: np.ndarray, h_min: float) -> np.ndarray:
+    """Whether Phi(values / sd) > PRUNE_BELOW, as the equivalent values >= h_min sd with
+    h_min = Phi^-1(PRUNE_BELOW): no division and no Phi. Zero variance: values >= 0."""
+    return values >= h_min * np.sqrt(np.maximum(var, 0.0))
+
+
+def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) -> np.ndarray:
     """(3, K, E) P(C_e and K_e / SL_e / SR_e) as one 6-condition orthant each (Sec. V-A1: the
     stick or slip cone adds two linear conditions in t = d - c to (7-10)), by sequential
     conditioning, so the dependence between where the edge lies and how it is tilted is kept.
 
     Pruning (Sec. IV-F): an event is no likelier than its least likely single condition; events
-    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). The 7 x 7
-    covariance of the four collision and three friction conditions is formed once per surviving
-    (move, edge) pair, and all surviving events go through one batched orthant evaluation.
+    where that bound is below ``PRUNE_BELOW`` are set to 0 (error < 1e-12 each). Bounds are
+    compared on standardized means (``_likely``). The covariances of the four collision
+    conditions with all nine (four collision, five signed friction) are formed once per
+    surviving (move, edge) pair, those among the friction conditions once per edge; all
+    surviving events go through one batched orthant evaluation that reads its 6 x 6 blocks from
+    this pool. ``means``, ``covs``: ``shape.edge_gaussians()``.
     """
-    means, covs = shape.edge_gaussians()
     a, b = _move_endpoints(a, b)
+    # PRUNE_BELOW <= 0 keeps every event but those with an impossible condition (exactly 0).
+    h_min = max(float(ndtri(PRUNE_BELOW)), -1e300) if PRUNE_BELOW > 0 else -1e300
     w = friction_functionals(load, shape.friction)[_FRICTION_ROWS] * _FRICTION_SIGNS[:, None]
     fric_grad = np.concatenate([-w, w], axis=1)  # (5, 4): gradient of w . (d - c) in (c, d)
     fric_mean = (means[:, 2:] - means[:, :2]) @ w.T  # (E, 5)
-    fric_var = np.einsum("rd,edf,rf->er", fric_grad, covs, fric_grad)
-    p_fric = ndtr(_standardize(fric_mean, fric_var))
-    event_bound = np.min(p_fric[:, _EVENT_PICK[:, 4:] - 4], axis=2).T  # (3, E)
+    fric_cov = fric_grad @ covs @ fric_grad.T  # (E, 5, 5)
+    fric_var = np.diagonal(fric_cov, axis1=1, axis2=2)
+    event_ok = np.all(_likely(fric_mean, fric_var, h_min)[:, _EVENT_PICK[:, 4:] - 4], axis=2).T
     # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
-    # +-perp(b - a), so their variances need only the 2 x 2 endpoint blocks.
+    # +-rot(b - a), so their means and variances are (K, 2) x (2, E) and (K, 4) x (4, E) products.
     move = b - a
-    perp = np.stack([-move[:, 1], move[:, 0]], axis=1)  # (K, 2)
-    lin_values = np.stack(
-        [
-            cross(move[:, None], means[None, :, :2] - a[:, None]),
-            cross(move[:, None], a[:, None] - means[None, :, 2:]),
-        ]
-    )
-    lin_var = np.stack(
-        [np.einsum("kd,edf,kf->ke", perp, covs[:, i : i + 2, i : i + 2], perp) for i in (0, 2)]
-    )
+    perp = _rot(move)  # (K, 2)
+    along = np.sum(perp * a, axis=1)[:, None]  # rot(move) . a
+    outer = (perp[:, :, None] * perp[:, None, :]).reshape(-1, 4)  # (K, 4)
     still = (np.linalg.norm(move, axis=1) == 0.0)[:, None]
-    keep = (np.min(ndtr(_standardize(lin_values, lin_var)), axis=0) > PRUNE_BELOW) & ~still
-    keep &= event_bound.max(axis=0)[None] > PRUNE_BELOW
+    keep = ~still & event_ok.any(axis=0)[None]
+    keep &= _likely(perp @ means[:, :2].T - along, outer @ covs[:, :2, :2].reshape(-1, 4).T, h_min)
+    keep &= _likely(along - perp @ means[:, 2:].T, outer @ covs[:, 2:, 2:].reshape(-1, 4).T, h_min)
     k_idx, e_idx = np.nonzero(keep)
-    # Second pass on the survivors: the 9 x 9 covariance of all conditions, once per pair.
+    # Second pass on the survivors: the covariance of the four collision conditions with all
+    # nine, once per pair, and of the friction conditions with each other, once per edge.
     values, grads = _conditions(a[k_idx], b[k_idx], means[e_idx, :2], means[e_idx, 2:])
     count = len(k_idx)
-    g9 = np.concatenate([np.moveaxis(grads, 0, 1), np.broadcast_to(fric_grad, (count, 5, 4))], 1)
-    v9 = np.concatenate([values.T, fric_mean[e_idx]], axis=1)  # (M, 9)
-    c9 = g9 @ covs[e_idx] @ np.swapaxes(g9, 1, 2)  # (M, 9, 9)
-    var = np.diagonal(c9, axis1=1, axis2=2)[:, :4]
-    bound = np.min(ndtr(_standardize(values.T, var)), axis=1)  # (M,)
-    slot, pos = np.nonzero(np.minimum(bound[None], event_bound[:, e_idx]) > PRUNE_BELOW)
-    pick = _EVENT_PICK[slot]  # (S, 6) rows of each live event
-    v6 = np.take(v9, (pos * 9)[:, None] + pick)
-    c6 = np.take(c9, (pos * 81)[:, None, None] + pick[:, :, None] * 9 + pick[:, None, :])
+    g9t = np.empty((count, 4, 9))  # gradients of the nine conditions as columns
+    g9t[:, :, :4], g9t[:, :, 4:] = np.swapaxes(grads, 1, 2), fric_grad.T
+    pool = np.empty(count * 36 + fric_cov.size)  # the pairs' (4, 9) blocks, then fric_cov
+    pair = np.matmul(grads @ covs[e_idx], g9t, out=pool[: count * 36].reshape(count, 4, 9))
+    pool[count * 36 :] = fric_cov.ravel()
+    var = np.diagonal(pair[:, :, :4], axis1=1, axis2=2).T  # (4, M)
+    alive = _likely(values, var, h_min).all(axis=0)[None] & event_ok[:, e_idx]  # (3, M)
+    slot, pos = np.nonzero(alive)
+    pick = np.ascontiguousarray(_EVENT_PICK[slot].T)  # (6, S) rows of each event among the 9
+    v9 = np.concatenate([values, fric_mean[e_idx].T])  # (9, M)
+    mean6 = np.take(v9, pick * count + pos)  # (6, S)
+    del values, grads, g9t, v9  # lower the peak memory of the orthant (fewer page faults)
+    # Pool index of entry (i, j) of an event: i < 4: pair[p, i, pick_j]; i >= 4 (friction
+    # condition f): pair[p, pick_j, f] if pick_j < 4, else fric_cov[e, f - 4, pick_j - 4].
+    at_pair, f = pos * 36, pick[4:]
+    at_fric = count * 36 + e_idx[pos] * 25 + (f - 4) * 5 - 4
+    rows, at_pair_f = at_pair + np.arange(4)[:, None] * 9, at_pair + f  # entries (i, 0), (j, f)
+
+    def column_at(at, out):
+        pick_j = np.take(pick, at)
+        np.add(rows, pick_j, out=out[:4])
+        np.copyto(out[4:], np.where(pick_j < 4, at_pair_f + 9 * pick_j, at_fric + pick_j))
+
+    var6 = np.take(pool, np.concatenate([rows + np.arange(4)[:, None], at_fric + f]))
     out = np.zeros((3, len(a), len(means)))
-    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(v6, c6)
+    out[slot, k_idx[pos], e_idx[pos]] = _orthant_rows(mean6, var6, pool, column_at)
     return out
 
 
@@ -284,17 +333,17 @@ def collision_probabilities(a, b, shape: GaussianShape, method: str = "bivariate
     return segment_collision_probabilities(a, b, means, covs, method)[0]
 
 
-def _edge_slip_terms(shape: GaussianShape, load) -> dict:
-    """Gaussian moments of the edge functionals wL.t, wR.t, wN.t and of adjacent-edge pairs."""
+def _edge_slip_terms(shape: GaussianShape, load, means, covs) -> dict:
+    """Gaussian moments of the edge functionals wL.t, wR.t, wN.t (t = d - c) from the edge
+    Gaussians ``means`` (E, 4), ``covs`` (E, 4, 4), and the basis of t for adjacent-edge pairs."""
     w = friction_functionals(load, shape.friction)  # (3, 2)
+    grad = np.concatenate([-w, w], axis=1)  # (3, 4): gradient of w . (d - c) in (c, d)
     rows = shape.edge_rows()
-    basis_t = shape.basis[rows[:, 2:]] - shape.basis[rows[:, :2]]  # (E, 2, m)
-    mean_t = shape.mean[rows[:, 2:]] - shape.mean[rows[:, :2]]  # (E, 2)
-    f_basis = np.einsum("kj,ejm->ekm", w, basis_t)  # (E, 3, m): functional k of edge e
     return {
-        "mean": mean_t @ w.T,  # (E, 3)
-        "cov": f_basis @ np.swapaxes(f_basis, 1, 2),  # (E, 3, 3) within an edge
-        "basis": f_basis,
+        "mean": (means[:, 2:] - means[:, :2]) @ w.T,  # (E, 3)
+        "cov": grad @ covs @ grad.T,  # (E, 3, 3) within an edge
+        "w": w,
+        "basis_t": shape.basis[rows[:, 2:]] - shape.basis[rows[:, :2]],  # (E, 2, m)
     }
 
 
@@ -304,8 +353,9 @@ def _vertex_transitions(shape: GaussianShape, terms: dict):
     _, left, right = edge_index_arrays(n, shape.closed)
     inner = (left >= 0) & (right >= 0)
     el, er = left[inner], right[inner]
-    mean, cov, fb = terms["mean"], terms["cov"], terms["basis"]
-    cross_cov = fb[el] @ np.swapaxes(fb[er], 1, 2)  # (V, 3, 3): functional i of l, j of r
+    mean, cov, w, basis_t = terms["mean"], terms["cov"], terms["w"], terms["basis_t"]
+    # (V, 3, 3): Cov(functional i of l, functional j of r) = w Cov(t_l, t_r) w^T
+    cross_cov = w @ (basis_t[el] @ np.swapaxes(basis_t[er], 1, 2)) @ w.T
     # Both slide directions at once: a left slide (row L_) arrives along r(v) = src and goes on
     # to l(v) = dst; a right slide (row R_) the other way round. cov_ds (2V, 3, 3) is
     # Cov(functional i of dst, functional j of src).
@@ -356,17 +406,23 @@ def _edge_contact_split(terms: dict) -> np.ndarray:
 def solve_chain(a: np.ndarray, b: np.ndarray, cyclic: bool) -> np.ndarray:
     """x_f = a_f + b_f x_{f+1} over the last axis (eqs. 21-22 along the feature sequence).
 
+    ``b`` broadcasts against ``a`` (e.g. one coefficient row shared by many right-hand sides).
     Open chains end with x_F = 0; cyclic chains wrap (x_F = x_0) and are solved exactly via
     x_f = y_f + (prod_{i >= f} b_i) x_0. Recursive doubling: O(F log F) vectorized work,
     ceil(log2 F) numpy steps and no Python loop over features.
     """
-    x, prod = a.astype(float).copy(), b.astype(float).copy()
-    size = a.shape[-1]
+    b = np.asarray(b, dtype=float)
+    shape = np.broadcast_shapes(np.shape(a), b.shape)
+    # Features first, so that every doubling step works on contiguous blocks.
+    x = np.moveaxis(np.broadcast_to(np.asarray(a, dtype=float), shape), -1, 0).copy()
+    prod = np.moveaxis(b, -1, 0).copy()
+    size = len(x)
     step = 1
     while step < size:
-        x[..., : size - step] = x[..., : size - step] + prod[..., : size - step] * x[..., step:]
-        prod[..., : size - step] = prod[..., : size - step] * prod[..., step:]
+        x[: size - step] += prod[: size - step] * x[step:]
+        prod[: size - step] = prod[: size - step] * prod[step:]
         step *= 2
+    x = np.moveaxis(x, 0, -1)
     if cyclic:
         tail = np.cumprod(b[..., ::-1], axis=-1)[..., ::-1]  # prod_{i >= f} b_i
         x0 = x[..., :1] / np.maximum(1.0 - tail[..., :1], 1e-300)
@@ -390,35 +446,35 @@ def dock_probabilities(
     """
     _check_shape(shape)
     unit(load, "load")
-    n, n_edges = shape.n_vertices, shape.n_edges
-    terms = _edge_slip_terms(shape, load)
+    n = shape.n_vertices
+    means, covs = shape.edge_gaussians()
+    terms = _edge_slip_terms(shape, load, means, covs)
     if method == "sequential":
-        events = _contact_events_sequential(starts, ends, shape, load)  # (3, K, E)
+        events = _contact_events_sequential(starts, ends, shape, load, means, covs)  # (3, K, E)
     else:
-        means, covs = shape.edge_gaussians()
         p_c = segment_collision_probabilities(starts, ends, means, covs, method)  # (K, E)
         events = p_c[None] * _edge_contact_split(terms).T[:, None, :]
     total = events.sum(axis=(0, 2))[None, :, None]
-    events = np.where(total > 1.0, events / np.maximum(total, 1e-300), events)
+    events /= np.maximum(total, 1.0)  # scaled to sum to 1 where they sum to more
     p_c = events.sum(axis=0)
     stop_edge = events[0]
     stop_vertex = np.zeros((len(p_c), n))
     if compliant:
         trans = _vertex_transitions(shape, terms)
-        count = n + n_edges
-        # feature f: vertex i at 2i, edge j at 2j + 1 (left to right along the polyline)
-        a_left, b_left = np.zeros((len(p_c), count)), np.ones((len(p_c), count))
-        a_right, b_right = a_left.copy(), b_left.copy()
-        a_left[:, 1::2], a_right[:, 1::2] = events[1], events[2]
-        b_left[:, 0::2], b_right[:, 0::2] = trans["cont_left"], trans["cont_right"]
-        slide_left = solve_chain(a_left, b_left, shape.closed)  # P(L_F), eq. (21)
-        slide_right = solve_chain(a_right[:, ::-1], b_right[:, ::-1], shape.closed)[:, ::-1]
+        # Eq. (21) along the edges: a left slide on edge j comes from a contact there or from a
+        # left slide on the next edge that continues over their common vertex; mirror image on
+        # the right. Both chains go through one solve_chain call (the right one reversed).
+        first, last = shape.edges[:, 0], shape.edges[:, 1]
+        count = len(p_c)
+        chains = solve_chain(
+            np.stack([events[1], events[2][:, ::-1]]),  # (2, K, E)
+            np.stack([trans["cont_left"][last], trans["cont_right"][first][::-1]])[:, None],
+            shape.closed,
+        )
         # eq. (20) at vertices: arrive by a left slide from r(v) or a right slide from l(v)
-        from_right = np.roll(slide_left, -1, axis=1)[:, 0::2]
-        from_left = np.roll(slide_right, 1, axis=1)[:, 0::2]
-        if not shape.closed:  # the ends have no neighbour on one side
-            from_right[:, -1] = 0.0
-            from_left[:, 0] = 0.0
+        from_right, from_left = np.zeros((count, n)), np.zeros((count, n))
+        from_right[:, first] = chains[0]  # P(L) on r(v)
+        from_left[:, last] = chains[1][:, ::-1]  # P(R) on l(v)
         stop_vertex = from_right * trans["stick_left"] + from_left * trans["stick_right"]
     clear = np.ones(len(p_c)) if p_clear is None else np.asarray(p_clear, dtype=float)
     stop_vertex, stop_edge = stop_vertex * clear[:, None], stop_edge * clear[:, None]
