@@ -60,7 +60,8 @@ def run(args) -> dict:
         f"{'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'err':>3} {'s/cycle':>7}"
     )
     results = []
-    for p_index, name in enumerate(args.problems):
+    for name in args.problems:
+        p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
         problem = problems.get(name)
         truths = [
             problem.sample_ground_truth(np.random.default_rng([args.seed, p_index, i]))
