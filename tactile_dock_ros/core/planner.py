@@ -12,7 +12,10 @@ and w the contact resolution. P_dock comes from the probabilistic simulation
 (``probsim``) under the moment-fit Gaussian of the posterior samples: candidates are ranked by
 the terminal move's estimate (all edges in one batched call); the reported P_dock is
 ``probsim.dock_probability`` of the whole chosen path (which also multiplies in the probability
-that the prefix touches nothing, close to 1 since it stays in the UOR).
+that the prefix touches nothing, close to 1 since it stays in the UOR). Both are capped per stop
+feature by the samples' frequency of that feature holding the load (``capped_p_dock``): the
+Gaussian fit does not encode the history's slip constraints, the samples do. The give-up test
+(Sec. III-B: best P_dock below ``give_up_threshold``) uses the capped values.
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
@@ -296,7 +299,7 @@ def plan(
         friction: Coulomb coefficient.
         contact_resolution: w of eq. (24), metres; also the planner's step and LOR margin scale.
         previous_targets: (k, 2) aim points of earlier plans (eq. 24's P).
-        give_up_threshold: give up when the best P_dock over all edges is below it.
+        give_up_threshold: give up when the best (capped) P_dock over all edges is below it.
         objective: one of ``OBJECTIVES`` (see ``score``).
         compliant: motion model of the probabilistic simulation.
         max_path_attempts: at most this many candidates are path-planned before giving up.

@@ -16,7 +16,7 @@ from ..core import explore, problems, simulate
 
 def add_arguments(parser) -> None:
     parser.add_argument("--instances", type=int, default=20, help="ground truths per problem")
-    parser.add_argument("--max-cycles", type=int, default=30, help="cycle cap per episode")
+    parser.add_argument("--max-cycles", type=int, default=12, help="cycle cap per episode")
     parser.add_argument("--samples", type=int, default=100, help="posterior samples per cycle")
     parser.add_argument("--problems", nargs="+", default=problems.names(), choices=problems.names())
     parser.add_argument(
