@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile_dock_ros.core import explore, problems, sampling, simulate
+from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate
 from tactile_dock_ros.core.history import History, Status
 
 
@@ -86,3 +86,26 @@ def test_plot_renders_an_episode(tmp_path):
     out = tmp_path / "episode.png"
     plot.render(problem, truth, result, out)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_slide_evidence_follows_the_slide_and_fits_the_truth():
+    # a slab steeper than the friction angle with a lip: a push near the top slides to the lip
+    problem = problems.get("notch")
+    truth = problem.prior.mean_vertices
+    x0 = -0.16  # on slab 1 (45 degrees), 2 cm below its notch and 10 cm above its lip
+    path = np.array([[x0, 0.45], [x0, -0.5]])
+    run = simulate.guarded_path(truth, False, path, problem.friction, problem.load, True, 0.01)
+    assert not run.docked and run.stop_feature.kind == "vertex"
+    evidence = explore.slide_evidence(truth, False, run, problem.load, 0.01)
+    added = len(evidence) - len(run.observations)
+    slid = abs(run.stop_feature.index - int(np.argmin(np.abs(truth[:, 0] - x0))))
+    assert added >= max(slid - 2, 1)  # one observation per edge crossed completely
+    new = evidence.subset(np.arange(len(evidence)) >= len(run.observations))
+    assert np.all(new.status == run.observations.status[-1])
+    assert constraints.history_consistent(False, truth[None], evidence, problem.friction)[0]
+    # a contact-free run adds nothing
+    away = np.array([[x0, 0.45], [x0, 0.5]])
+    free = simulate.guarded_path(truth, False, away, problem.friction, problem.load)
+    assert len(explore.slide_evidence(truth, False, free, problem.load, 0.01)) == len(
+        free.observations
+    )

@@ -6,7 +6,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile_dock_ros.core import planner, problems, probsim
+from tactile_dock_ros.core import planner, problems, probsim, simulate
 from tactile_dock_ros.core.freespace import FreeSpace, likely_obstacle_region
 from tactile_dock_ros.core.shape import GaussianShape
 
@@ -40,8 +40,11 @@ def test_plan_is_free_then_loads_through_target_edge(name):
     assert np.allclose(plan.target_point, 0.5 * (c + d))
     assert shapely.intersects(shapely.LineString([a, b]), shapely.LineString([c, d]))
     posterior = GaussianShape.from_samples(samples, problem.prior.closed, problem.friction)
-    expected = probsim.dock_probability(posterior, plan.path, problem.load).p_dock
+    whole = probsim.dock_probability(posterior, plan.path, problem.load)
+    holding = planner.holding_frequencies(samples, False, problem.load, problem.friction)
+    expected = planner.capped_p_dock(whole.p_stop_vertex, whole.p_stop_edge, holding)
     assert plan.p_dock == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    assert plan.p_dock <= whole.p_dock + 1e-12  # the cap only removes probability
     assert plan.p_dock >= plan.candidates.p_dock.max() * 0.5  # prefix rarely touches anything
 
 
@@ -75,8 +78,45 @@ def test_shortest_path_avoids_obstacles_and_is_no_longer_than_detour():
     assert length <= np.hypot(1.0, 1.0) + 2 + np.hypot(0.05, 1.0) + 0.02  # over the top
 
 
+@pytest.mark.parametrize("name", problems.names())
+def test_holding_frequencies_match_the_simulated_contacts(name):
+    problem, samples, _ = _prior_plan(name)
+    q_edge, q_vertex = planner.holding_frequencies(samples, False, problem.load, problem.friction)
+    edges = problem.prior.edges
+    for e in range(len(edges)):  # a handful of dozen edges, each one vectorized call
+        which = np.full(len(samples), e)
+        rigid = simulate.slide_outcomes(
+            samples, False, which, problem.load, problem.friction, False
+        )
+        facing = samples[:, edges[e, 1]] - samples[:, edges[e, 0]]
+        faces = facing @ simulate.friction_functionals(problem.load, problem.friction)[2] > 0
+        assert q_edge[e] == pytest.approx(np.mean((rigid[0] == simulate.STUCK_EDGE) & faces))
+        # a compliant slide from edge e that ends stuck at a vertex: that vertex can trap
+        outcome, vertex, _ = simulate.slide_outcomes(
+            samples, False, which, problem.load, problem.friction, True
+        )
+        stuck = outcome == simulate.STUCK_VERTEX
+        for v in np.unique(vertex[stuck]):
+            assert q_vertex[v] >= np.mean(stuck & (vertex == v)) - 1e-12
+    assert np.all((q_edge >= 0) & (q_edge <= 1)) and q_vertex[0] == q_vertex[-1] == 0.0
+
+
+def test_cap_removes_features_no_sample_lets_hold():
+    stop_vertex = np.array([[0.1, 0.2, 0.0]])
+    stop_edge = np.array([[0.3, 0.05]])
+    holding = (np.array([0.0, 0.5]), np.array([0.0, 0.01, 0.0]))
+    capped = planner.capped_p_dock(stop_vertex, stop_edge, holding)
+    assert capped == pytest.approx([0.05 + 0.01])
+
+
 def test_no_edge_facing_the_load_gives_up():
-    _, _, plan = _prior_plan("notch", load=np.array([0.0, 1.0]))
+    # a flat floor (solid below, vertices right to left) pulled upward: no edge resists the load
+    xs = np.linspace(0.3, -0.3, 6)
+    mean = np.stack([xs, np.zeros(6)], axis=1).ravel()
+    basis = np.tile([[0.0, 0.0], [0.0, 0.01]], (6, 1))[:, 1:]  # vertical offset, 1 cm
+    shape = GaussianShape(mean, basis, closed=False, friction=0.5)
+    samples = shape.vertices(shape.sample_z(np.random.default_rng(0), 20))
+    plan = planner.plan(samples, shape, None, np.array([0.0, 0.3]), np.array([0.0, 1.0]))
     assert plan.decision == "give_up" and "faces" in plan.reason
     assert plan.path.shape == (0, 2) and plan.target_edge == -1
 

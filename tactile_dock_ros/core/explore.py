@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import planner, sampling, simulate
-from .history import History
+from .history import History, Status
 
 STRATEGIES = ("ours", "gw", "ig")
 
@@ -141,9 +141,12 @@ def run_episode(
             log.append(
                 CycleLog(**entry, docked=run.docked, contact=run.contact, stop_point=run.stop_point)
             )
-            history = history.extend(
-                run.observations.a, run.observations.b, run.observations.status
-            )
+            evidence = run.observations
+            if compliant and not run.docked:
+                evidence = slide_evidence(
+                    ground_truth, prior.closed, run, problem.load, problem.contact_resolution
+                )
+            history = history.extend(evidence.a, evidence.b, evidence.status)
             targets = np.vstack([targets, decision.target_point])
             tool = _backed_off(run, decision.path, problem.contact_resolution)
             if run.docked:
@@ -151,6 +154,60 @@ def run_episode(
     except Exception as error:  # the loop reports every failure, never raises
         return _finish(history, log, "error", f"{type(error).__name__}: {error}")
     return _finish(history, log, "cycle_cap", f"no dock after {max_cycles} cycles")
+
+
+def slide_evidence(
+    ground_truth: np.ndarray,
+    closed: bool,
+    run: simulate.Execution,
+    load,
+    contact_resolution: float,
+) -> History:
+    """``run.observations`` plus what the compliant slide after the first contact showed.
+
+    ``simulate.guarded_path`` records the first loading contact only (its stick/slip status).
+    Under compliance a slipping tool then slides along the surface up to the vertex where it
+    separates (Sec. V-A2), pushing along ``load`` and slipping all the way. The robot knows its
+    trace, a polyline whose corners are where its direction changed; each straight piece
+    between two corners (a surface edge crossed completely) gives, at its middle, the
+    observation the first contact gave: a segment of length ``contact_resolution`` along
+    ``load`` through the point with the first contact's slip status (eq. 13). Decision: one
+    point per piece; two per piece pinned the surface so tightly that the sampler's seed search
+    failed on three_ledges (and then dropped consistent observations). Without
+    this the posterior only learns that the first contacted edge slips and keeps proposing the
+    edges the tool already slid over (three_ledges: P_dock stayed near 0.5 for 30 cycles on
+    infeasible truths), so the give-up test of Sec. III-B never fired.
+    """
+    obs = run.observations
+    status = int(obs.status[-1]) if len(obs) else Status.FREE
+    feature = run.stop_feature
+    if status not in (Status.SLIP_LEFT, Status.SLIP_RIGHT) or feature is None:
+        return obs
+    if feature.kind != "vertex":
+        return obs
+    v = np.asarray(ground_truth, float)
+    edges, left, right = simulate.edge_index_arrays(len(v), closed)
+    contact = 0.5 * (obs.a[-1] + obs.b[-1])
+    half = 0.5 * contact_resolution * simulate.unit(load, "load")
+    hit, edge, _, _ = simulate.first_hits(
+        v[None, edges[:, 0]], v[None, edges[:, 1]], contact - half, contact + half
+    )
+    if not hit[0]:
+        return obs
+    going_left = status == Status.SLIP_LEFT
+    trace = [int(edges[edge[0], 0] if going_left else edges[edge[0], 1])]
+    for _ in range(len(v)):  # the slide visits each vertex at most once
+        if trace[-1] == feature.index:
+            break
+        nxt = int(left[trace[-1]] if going_left else right[trace[-1]])
+        if nxt < 0:
+            break
+        trace.append(int(edges[nxt, 0] if going_left else edges[nxt, 1]))
+    crossed = np.array(trace)  # edges crossed completely: between consecutive trace vertices
+    if len(crossed) < 2:
+        return obs
+    mid = 0.5 * (v[crossed[:-1]] + v[crossed[1:]])
+    return obs.extend(mid - half, mid + half, np.full(len(mid), status))
 
 
 def _backed_off(run, path: np.ndarray, contact_resolution: float) -> np.ndarray:

@@ -12,7 +12,10 @@ and w the contact resolution. P_dock comes from the probabilistic simulation
 (``probsim``) under the moment-fit Gaussian of the posterior samples: candidates are ranked by
 the terminal move's estimate (all edges in one batched call); the reported P_dock is
 ``probsim.dock_probability`` of the whole chosen path (which also multiplies in the probability
-that the prefix touches nothing, close to 1 since it stays in the UOR).
+that the prefix touches nothing, close to 1 since it stays in the UOR). Both are capped per stop
+feature by the samples' frequency of that feature holding the load (``capped_p_dock``): the
+Gaussian fit does not encode the history's slip constraints, the samples do. The give-up test
+(Sec. III-B: best P_dock below ``give_up_threshold``) uses the capped values.
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
@@ -33,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import probsim
+from . import probsim, simulate
 from .freespace import FreeSpace, likely_obstacle_region
 from .shape import GaussianShape
 
@@ -150,16 +153,64 @@ def terminal_segments(
     }
 
 
+def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float):
+    """Fraction of posterior samples in which each edge (E,) / vertex (n,) can hold the load.
+
+    An edge holds when it faces the load and slips neither way (eq. 12); a vertex traps when a
+    slide can arrive on one side and the edge on the other side faces the load without carrying
+    the slide on (Sec. V-A2): l(v) slips right and r(v) does not, or r(v) slips left and l(v)
+    does not. Polyline ends never trap. These are eq. (19)'s sample estimates of the events
+    P(F holds), over samples that satisfy every history constraint exactly.
+    """
+    n = samples.shape[1]
+    edges, left, right = simulate.edge_index_arrays(n, closed)
+    tangents = samples[:, edges[:, 1]] - samples[:, edges[:, 0]]
+    flags = tangents @ simulate.friction_functionals(load, friction).T > 0.0  # (N, E, 3)
+    slip_left, slip_right, faces = flags[..., 0], flags[..., 1], flags[..., 2]
+    holds = faces & ~slip_left & ~slip_right
+    pad = np.zeros((len(samples), 1), dtype=bool)  # edge index -1 (missing neighbour)
+    sl, sr, fa = (np.hstack([x, pad]) for x in (slip_left, slip_right, faces))
+    ends = (left < 0) | (right < 0)
+    trap = (sr[:, left] & fa[:, right] & ~sr[:, right]) | (
+        sl[:, right] & fa[:, left] & ~sl[:, left]
+    )
+    return holds.mean(axis=0), np.where(ends, 0.0, trap.mean(axis=0))
+
+
+def capped_p_dock(stop_vertex, stop_edge, holding) -> np.ndarray:
+    """P_dock (...,) from probsim's stop distributions, each feature's term capped at the sample
+    frequency of that feature holding the load (``holding_frequencies``).
+
+    Decision (the paper uses one estimator): P(stop at F) <= P(F holds), and the posterior
+    samples satisfy the history constraints exactly while probsim's moment-fit Gaussian does
+    not (a slip observation leaves the slipped edge a few per cent of sticking under the fit).
+    The cap removes such features; a feature no sample lets hold counts zero (resolution 1/N,
+    as in eq. 19). Mass removed from a feature is not passed on down the slide.
+    """
+    q_edge, q_vertex = holding
+    total = np.minimum(stop_edge, q_edge).sum(axis=-1) + np.minimum(stop_vertex, q_vertex).sum(
+        axis=-1
+    )
+    return np.clip(total, 0.0, 1.0)
+
+
 def evaluate(
     posterior: GaussianShape,
     segments: dict[str, np.ndarray],
     load: np.ndarray,
     compliant: bool,
+    holding: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Candidates:
-    """P_dock and stop-feature entropy of every terminal segment at once (steps 3-4, Sec. V-B)."""
+    """P_dock and stop-feature entropy of every terminal segment at once (steps 3-4, Sec. V-B).
+
+    ``holding`` (from ``holding_frequencies``) caps probsim's per-feature stop probabilities
+    (``capped_p_dock``).
+    """
     p_dock, stop_vertex, stop_edge = probsim.dock_probabilities(
         posterior, segments["start"], segments["end"], load, compliant
     )
+    if holding is not None:
+        p_dock = capped_p_dock(stop_vertex, stop_edge, holding)
     stops = np.hstack([stop_vertex, stop_edge])
     outcome = np.clip(np.hstack([stops, 1.0 - stops.sum(axis=1, keepdims=True)]), 0.0, 1.0)
     entropy = -np.sum(outcome * np.log(np.where(outcome > 0, outcome, 1.0)), axis=1)
@@ -248,7 +299,7 @@ def plan(
         friction: Coulomb coefficient.
         contact_resolution: w of eq. (24), metres; also the planner's step and LOR margin scale.
         previous_targets: (k, 2) aim points of earlier plans (eq. 24's P).
-        give_up_threshold: give up when the best P_dock over all edges is below it.
+        give_up_threshold: give up when the best (capped) P_dock over all edges is below it.
         objective: one of ``OBJECTIVES`` (see ``score``).
         compliant: motion model of the probabilistic simulation.
         max_path_attempts: at most this many candidates are path-planned before giving up.
@@ -267,7 +318,8 @@ def plan(
     if len(segments["edges"]) == 0:
         return _give_up("no edge of the shape faces the load direction")
     posterior = GaussianShape.from_samples(samples, shape.closed, friction)
-    candidates = evaluate(posterior, segments, load, compliant)
+    holding = holding_frequencies(samples, shape.closed, load, friction)
+    candidates = evaluate(posterior, segments, load, compliant, holding)
     best = float(candidates.p_dock.max())
     if best < give_up_threshold:
         return _give_up(
@@ -295,7 +347,8 @@ def plan(
         if space.touches_outline(path[:-1]):
             continue
         # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
-        p_dock = probsim.dock_probability(posterior, path, load, compliant).p_dock
+        whole = probsim.dock_probability(posterior, path, load, compliant)
+        p_dock = float(capped_p_dock(whole.p_stop_vertex, whole.p_stop_edge, holding))
         value = values[j] * p_dock / max(candidates.p_dock[j], 1e-300)
         return Plan(
             "dock",

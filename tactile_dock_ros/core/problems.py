@@ -102,51 +102,81 @@ def _build(name: str, spec: _Spec) -> Problem:
     )
 
 
-def _sloper() -> Problem:
-    """A single slope at the friction angle (Fig. 8): about half the truths are too steep.
+NOTCH_SIGMA = 0.012
+NOTCH_SLOPE = 0.5
 
-    The slope's angle is uncertain only through the rigid rotation, so a ground truth is feasible
-    roughly when the rotation makes the slope flatter than atan(mu).
+
+def _sloper() -> Problem:
+    """Two rounded sloping holds, one above the other, near the friction angle (Figs. 2, 8).
+
+    Each hold's top slopes outward at about atan(mu) and rounds over into an overhanging lip, so
+    a slide on one hold falls off its lip and never reaches the other. The tops are hidden from
+    the camera: smooth deviations (12 mm, 15 cm) tilt each top by a few degrees independently
+    and the rotation (3 degrees) tilts both. Whether a hold holds, and which, is uncertain:
+    about half the truths have no feasible docking site.
     """
     mu = 0.5
-    rise = 0.7 * mu  # slope angle atan(mu) over 0.7 m
     return _build(
         "sloper",
         _Spec(
-            outline=[(-0.35, -0.3), (-0.35, 0.2), (0.35, 0.2 - rise), (0.35, -0.3)],
+            outline=[
+                (-0.35, -0.05),
+                (-0.35, 0.2),
+                (-0.05, 0.2 - 0.30 * 0.63),  # upper hold: top at ~29 degrees
+                (-0.02, 0.2 - 0.30 * 0.63 - 0.04),  # rounded lip
+                (-0.06, -0.05),  # overhanging riser
+                (0.30, -0.05 - 0.36 * 0.61),  # lower hold
+                (0.33, -0.05 - 0.36 * 0.61 - 0.04),
+                (0.30, -0.35),
+            ],
             n_vertices=12,
             load=(0.0, -1.0),
             friction=mu,
             start=(0.0, 0.45),
             sensor=(0.8, -0.6),
-            sigma_theta=np.deg2rad(4.0),
+            sigma_theta=np.deg2rad(3.0),
             sigma_depth=0.0005,
-            sigma_hidden=0.0,
-            hidden_columns=0,
+            sigma_hidden=0.013,
+            hidden_length=0.15,
         ),
     )
 
 
+def _slab_outline(top: tuple[float, float], slab: float, notch: float) -> list[tuple[float, float]]:
+    """Two slabs falling at slope ``slab`` (dy/dx) from ``top``, each with a 4 cm notch piece
+    of slope ``notch`` 13 cm along it, a lip 12 cm further and an overhanging 8 cm riser."""
+    x, y = top
+    points = [(x, y - 0.25), (x, y)]
+    for _ in range(2):
+        for dx, slope in ((0.13, slab), (0.04, notch), (0.12, slab)):
+            x, y = x + dx, y - dx * slope
+            points.append((round(x, 4), round(y, 4)))
+        x, y = x - 0.03, y - 0.08  # overhanging riser: a slide falls off the lip
+        points.append((round(x, 4), round(y, 4)))
+    points[-1] = (points[-2][0], points[-2][1] - 0.15)
+    return points
+
+
 def _notch() -> Problem:
-    """A slope too steep to hold, with a small hidden notch half-way that can trap the tool."""
+    """Two slabs too steep to hold, each with a small hidden notch that can trap the tool.
+
+    The slabs fall at 45 degrees (mu = 0.5 holds up to 26.6) and end in overhanging lips, so a
+    slide falls off and never reaches the other slab. A third of the way down each slab a 4 cm
+    notch piece, flatter than the friction angle in the mean, can stop a sliding tool, but it
+    is hidden from the camera: smooth deviations (``NOTCH_SIGMA``, 3 cm) make its tilt and
+    position uncertain, and in many truths one notch (sometimes both) is too steep to hold.
+    """
     return _build(
         "notch",
         _Spec(
-            outline=[
-                (-0.3, -0.3),
-                (-0.3, 0.25),
-                (-0.04, 0.06),
-                (-0.02, 0.045),
-                (0.02, 0.05),
-                (0.3, -0.16),
-                (0.3, -0.3),
-            ],
+            outline=_slab_outline((-0.35, 0.25), 1.0, NOTCH_SLOPE),
             n_vertices=24,
             load=(0.0, -1.0),
             friction=0.5,
             start=(0.0, 0.45),
-            sensor=(0.8, -0.6),
-            sigma_hidden=0.012,
+            sensor=(0.8, -0.9),
+            sigma_depth=0.0005,
+            sigma_hidden=NOTCH_SIGMA,
             hidden_length=0.03,
         ),
     )

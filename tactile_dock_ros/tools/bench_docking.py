@@ -16,7 +16,7 @@ from ..core import explore, problems, simulate
 
 def add_arguments(parser) -> None:
     parser.add_argument("--instances", type=int, default=20, help="ground truths per problem")
-    parser.add_argument("--max-cycles", type=int, default=30, help="cycle cap per episode")
+    parser.add_argument("--max-cycles", type=int, default=12, help="cycle cap per episode")
     parser.add_argument("--samples", type=int, default=100, help="posterior samples per cycle")
     parser.add_argument("--problems", nargs="+", default=problems.names(), choices=problems.names())
     parser.add_argument(
@@ -60,7 +60,8 @@ def run(args) -> dict:
         f"{'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'err':>3} {'s/cycle':>7}"
     )
     results = []
-    for p_index, name in enumerate(args.problems):
+    for name in args.problems:
+        p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
         problem = problems.get(name)
         truths = [
             problem.sample_ground_truth(np.random.default_rng([args.seed, p_index, i]))
