@@ -1,7 +1,5 @@
 """Posterior sampling benchmark (paper Fig. 9): EST = seconds / ESS of rejection, MH, Gibbs and
-HMC on three Sloper problems of increasing restriction (and HMC against rejection with many
-samples on the two most constrained, where the default HMC batch is widest) and on three_ledges
-after 10 probes, plus
+HMC on three Sloper problems of increasing restriction and on three_ledges after 10 probes, plus
 the HMC throughput (effective samples per second, one thread) on that posterior over several
 runs, and our HMC against the PyPI package tmg-hmc on a Brownian bridge constrained to y <= 0.
 
@@ -31,12 +29,17 @@ CHAINS = {"hmc": None, "gibbs": 4, "mh": 4, "rejection": 1}
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--samples", type=int, default=1000, help="samples per Sloper run")
+    parser.add_argument(
+        "--samples",
+        type=int,
+        default=4096,
+        help="samples per Sloper run (enough for stable ESS estimates of MH and Gibbs too)",
+    )
     parser.add_argument(
         "--ledges-samples", type=int, default=200, help="samples per three_ledges run"
     )
     parser.add_argument(
-        "--max-draws", type=int, default=2_000_000, help="rejection-sampling draw budget"
+        "--max-draws", type=int, default=4_000_000, help="rejection-sampling draw budget"
     )
     parser.add_argument(
         "--ledges-max-draws", type=int, default=100_000, help="rejection budget, three_ledges"
@@ -55,12 +58,6 @@ def add_arguments(parser) -> None:
         type=int,
         default=7,
         help="runs (distinct seeds) of the three_ledges HMC throughput measurement",
-    )
-    parser.add_argument(
-        "--batch-samples",
-        type=int,
-        default=4096,
-        help="samples of the HMC vs rejection run on Fig. 9 problems 2 and 3 (wide HMC batch)",
     )
     parser.add_argument("--bridge-points", type=int, default=50, help="bridge interior points")
     parser.add_argument("--bridge-samples", type=int, default=1000, help="bridge samples")
@@ -285,18 +282,6 @@ def run(args) -> dict:
             METHODS,
             args.max_draws,
         )
-    batch = {}
-    for index in (2, 3):  # many samples: the default HMC batch widens to 256 chains
-        problem, history = fig9_problem(index)
-        batch[f"fig9_problem{index}"] = _run_problem(
-            f"Fig. 9 problem {index}, {args.batch_samples} samples",
-            problem,
-            history,
-            args.batch_samples,
-            args,
-            ("hmc", "rejection"),
-            max(args.max_draws, 2000 * args.batch_samples),
-        )
     problem, history, _ = three_ledges_after_probes(10, seed=args.seed)
     problems_out["three_ledges_10_probes"] = _run_problem(
         "three_ledges after 10 probes",
@@ -309,7 +294,6 @@ def run(args) -> dict:
     )
     return {
         "problems": problems_out,
-        "many_samples": batch,
         "three_ledges_hmc_throughput": _ledges_throughput(args),
         "warm_start": _warm_start(args),
         "bridge": _bridge(args),
