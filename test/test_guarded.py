@@ -1,5 +1,7 @@
 """Guarded-move executor logic in closed loop with the mock physics (no DDS)."""
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -94,6 +96,36 @@ def test_compliant_slide_that_loses_contact_fails_and_retreats():
     assert run.history.status[-1] == Status.SLIP_LEFT
     assert run.stop_point[0] > 0.48  # slid from x = 0.4 to the edge of the cliff
     assert np.linalg.norm(sim.force) < 3.0  # no more than the lateral spring's pull
+
+
+# 45 then 60 degrees down to the right, then a wall: a slide from x = 0 crosses the 60 degree edge
+BENT_SLOPE_THEN_CLIFF = np.array([[0.125, -0.4], [0.125, -0.162], [0.075, -0.075], [-0.1, 0.1]])
+
+
+def test_compliant_slide_reports_every_edge_it_crossed_before_falling_off():
+    run, *_ = _execute(
+        BENT_SLOPE_THEN_CLIFF, [[0.0, 0.2], [0.0, -0.5]], compliant=True, lateral_stiffness=25.0
+    )
+    assert run.outcome is Outcome.CONTACT_FAILED and "lost contact" in run.detail, run.detail
+    assert list(run.history.status) == [Status.FREE, Status.SLIP_LEFT, Status.SLIP_LEFT]
+    middle = 0.5 * (run.history.a[-1] + run.history.b[-1])
+    assert middle == pytest.approx([0.1, -0.1185], abs=0.006)  # the 60 degree edge's middle
+    direction = run.history.b[-1] - run.history.a[-1]
+    assert direction == pytest.approx([0.0, -SETTINGS.contact_resolution])  # along the load
+
+
+def test_crossed_pieces_are_the_edges_between_the_trace_corners():
+    from tactile_dock_ros.nodes.guarded import crossed_pieces
+
+    corner = np.array([[0.0, 0.0], [0.1, -0.1], [0.2, -0.3], [0.25, -0.3]])
+    dense = np.vstack(
+        [np.linspace(p, q, 20, endpoint=False) for p, q in itertools.pairwise(corner)]
+    )
+    trace = np.vstack([dense, corner[-1:]])
+    middles = crossed_pieces(trace, 0.01)
+    np.testing.assert_allclose(middles, [[0.15, -0.2], [0.225, -0.3]], atol=1e-9)
+    assert len(crossed_pieces(np.linspace([0, 0], [0.1, -0.1], 30), 0.01)) == 0  # one piece
+    assert len(crossed_pieces(trace, 0.06)) == 1  # the 5 cm last piece is below resolution
 
 
 def test_compliant_plan_sticks_at_once_on_a_floor_and_bounds_long_slides():

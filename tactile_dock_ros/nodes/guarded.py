@@ -19,10 +19,13 @@ Decisions where the paper leaves the robot side open:
   stuck (DOCKED where it stopped, e.g. trapped at a vertex) once it holds still within
   ``slip_tolerance`` for ``settle_time`` under ``load_force`` (the push pauses at that force, so
   it never grows towards the limit); the attempt fails when the tool moves straight along the
-  load for ``contact_resolution`` with less than the plan's contact force (free space: the
-  surface turned away, the separation of ``core.simulate``) or the slide exceeds ``max_slide``.
-  The evidence is that of ``core.simulate.guarded_path``: the status of the first contact (the
-  slip), even when the slide then sticks. A finite lateral stiffness pulls back as the tool
+  load for ``contact_resolution`` with less than the plan's contact force resisting the load
+  (free space or a wall along the load: the surface turned away, the separation of
+  ``core.simulate``) or the slide exceeds ``max_slide``.
+  The evidence is that of ``core.explore``'s simulated robot: the status of the first contact
+  (the slip), even when the slide then sticks, and after a slide that ended in separation one
+  more slip observation at the middle of every edge the trace crossed completely
+  (``crossed_pieces``). A finite lateral stiffness pulls back as the tool
   slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may stop on a slope that the
   paper's ideal compliance would slide down; the test reports the hold the arm actually has.
 * Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
@@ -134,8 +137,10 @@ class GuardedRun:
     _segments: list = field(default_factory=list)
     _budget: float = field(init=False)
     _t: float = 0.0  # time of the current tick, seconds
+    _force: np.ndarray = field(default_factory=lambda: np.zeros(2))  # of this tick, newtons
     _slip: Status | None = None  # first-contact status of a compliant slide
     _still: tuple = ()  # (position, since seconds): where a compliant slide last rested
+    _trace: list = field(default_factory=list)  # tool positions on the surface while sliding
 
     def __post_init__(self) -> None:
         tool = np.asarray(self.tool, float)
@@ -182,7 +187,7 @@ class GuardedRun:
             return self.abort(f"force {magnitude:.1f} N above the limit", tool)
         if t - self.t_start > self._budget:
             return self.abort(f"{self._phase.value} exceeded the {self._budget:.1f} s budget", tool)
-        self._t = t
+        self._t, self._force = t, np.asarray(force, float)
         velocity = {
             _Phase.MOVE: self._step_move,
             _Phase.LOAD_TEST: self._step_load_test,
@@ -259,18 +264,25 @@ class GuardedRun:
         rest, since = self._still
         moved = tool - rest
         across = abs(d[0] * moved[1] - d[1] * moved[0])
-        # Moving straight along the load with little force since the last rest: free space.
+        # Moving straight along the load, little of the force resisting it: free space, or a
+        # surface parallel to the load (a wall the arm's lateral spring presses against).
         free = (
             across <= self.settings.slip_tolerance
             and moved @ d >= self.settings.contact_resolution
-            and force < self.plan.force_threshold
+            and -(self._force @ d) < self.plan.force_threshold
         )
         if free or slid > self.settings.max_slide:
             self._record_contact(self._anchor, d, self._slip)
+            if free:  # the trace up to the rest point ended at the vertex it slid off
+                trace = np.array([self._anchor, *self._trace, rest])
+                pieces = crossed_pieces(trace, self.settings.contact_resolution)
+                for middle in pieces:
+                    self._record_contact(middle, d, self._slip)
             why = "lost contact" if free else "exceeded max_slide"
             return self._start_retreat(tool, f"{how} and {why} under the load")
         if across > self.settings.slip_tolerance or moved @ d < -self.settings.slip_tolerance:
             self._still = (tool.copy(), self._t)  # still sliding along the surface
+            self._trace.append(tool.copy())
         elif np.linalg.norm(moved) <= self.settings.slip_tolerance:
             if force >= self.settings.load_force and self._t - since >= self.settings.settle_time:
                 self._record_contact(self._anchor, d, self._slip)
@@ -308,6 +320,37 @@ class GuardedRun:
         self.outcome, self.detail = outcome, detail
         self.stop_point = np.asarray(tool, float).copy()
         self._phase = _Phase.DONE
+
+
+def crossed_pieces(trace: np.ndarray, resolution: float) -> np.ndarray:
+    """Middles (k, 2) of the straight pieces of a slide trace (n, 2) after its first piece.
+
+    The trace's corners (Douglas-Peucker, tolerance ``resolution`` / 4) are where the surface
+    turned; the first piece covers only part of the first contacted edge (its evidence is the
+    first contact), every later piece is an edge crossed completely, ending at a corner or at
+    the vertex the tool slid off. Pieces shorter than ``resolution`` are dropped. This is the
+    evidence ``core.explore.slide_evidence`` gives the simulated robot, from the robot's own
+    trace. The loop pops at most one split per trace point.
+    """
+    keep, stack = {0, len(trace) - 1}, [(0, len(trace) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        chord, rel = trace[j] - trace[i], trace[i + 1 : j] - trace[i]
+        length = float(np.linalg.norm(chord))
+        if length > 0:
+            off = np.abs(chord[0] * rel[:, 1] - chord[1] * rel[:, 0]) / length
+        else:
+            off = np.linalg.norm(rel, axis=1)
+        k = int(np.argmax(off))
+        if off[k] > resolution / 4:
+            keep.add(i + 1 + k)
+            stack += [(i, i + 1 + k), (i + 1 + k, j)]
+    corners = trace[sorted(keep)]
+    a, b = corners[1:-1], corners[2:]
+    long_enough = np.linalg.norm(b - a, axis=1) >= resolution
+    return (0.5 * (a + b))[long_enough]
 
 
 class ForceFilter:
