@@ -5,9 +5,9 @@ Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wr
 planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
 ``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends. Messages in
-an unexpected frame are dropped with an error (tf2 is not used). The safety limit on force is
-checked on the whole 3-D force, out-of-plane pushes included. The state machine and the other
-safety checks are in ``nodes.guarded``; this file is the ROS glue.
+an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
+safety checks (the force limit on the whole 3-D force, out-of-plane pushes included) are in
+``nodes.guarded``; this file is the ROS glue.
 """
 
 from __future__ import annotations
@@ -160,7 +160,7 @@ class ExecutorNode(Node):
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state = msg.message.split(":")[0]
         episode = int({kv.key: kv.value for kv in msg.values}.get("episode", "0"))
-        plan = self.run.plan if self.run is not None else (self.pending or (None,))[0]
+        plan = self.run.plan if self.run else self.pending[0] if self.pending else None
         if plan is None or (plan.episode == episode and state == "RUNNING"):
             return
         why = f"episode {episode} is {state}" if plan.episode == episode else "a new episode began"
@@ -205,11 +205,10 @@ class ExecutorNode(Node):
                 run.abort(f"sensor timeout: no F/T data for {age:.2f} s", self.tool)
         elif not run.done:
             force = self.base_force()
-            if np.linalg.norm(force) > self.limits.max_force:  # out-of-plane force counts too
-                run.abort(f"force {np.linalg.norm(force):.1f} N (3-D) above the limit", self.tool)
-            else:
-                velocity = run.step(t, self.tool, self.plane.vector_to_plane(force), age)
-                velocity = run.check_next(self.tool, velocity, self.dt)
+            in_plane = self.plane.vector_to_plane(force)
+            normal = float(np.sqrt(max(force @ force - in_plane @ in_plane, 0.0)))
+            velocity = run.step(t, self.tool, in_plane, age, normal_force=normal)
+            velocity = run.check_next(self.tool, velocity, self.dt)
         self.command(velocity)
         if run.done:
             self.run = None

@@ -173,8 +173,17 @@ class GuardedRun:
         self._finish(Outcome.ABORTED, reason, tool)
         return np.zeros(2)
 
-    def step(self, t: float, tool: np.ndarray, force: np.ndarray, sensor_age: float) -> np.ndarray:
-        """Velocity command (2,) m/s for this control tick; zero once done."""
+    def step(
+        self,
+        t: float,
+        tool: np.ndarray,
+        force: np.ndarray,
+        sensor_age: float,
+        normal_force: float = 0.0,
+    ) -> np.ndarray:
+        """Velocity command (2,) m/s for this control tick; zero once done. ``force`` (2,) is
+        the in-plane contact force, ``normal_force`` its component along the plane normal (N):
+        the force limit applies to the whole 3-D force."""
         if self.done:
             return np.zeros(2)
         tool = np.asarray(tool, float)
@@ -183,8 +192,9 @@ class GuardedRun:
             return self.abort(f"sensor timeout: data {sensor_age:.2f} s old", tool)
         if not self.limits.inside(tool):
             return self.abort(f"tool left the workspace at {np.round(tool, 3).tolist()}", tool)
-        if magnitude > self.limits.max_force:
-            return self.abort(f"force {magnitude:.1f} N above the limit", tool)
+        total = float(np.hypot(magnitude, normal_force))
+        if total > self.limits.max_force:
+            return self.abort(f"force {total:.1f} N (3-D) above the limit", tool)
         if t - self.t_start > self._budget:
             return self.abort(f"{self._phase.value} exceeded the {self._budget:.1f} s budget", tool)
         self._t, self._force = t, np.asarray(force, float)
