@@ -77,6 +77,7 @@ def test_history_round_trip_keeps_order_status_and_plan_ids():
     history = _history()
     msg = convert.history_to_msg(history, HEADER, plan_ids=[1, 1, 2])
     assert [s.plan_id for s in msg.segments] == [1, 1, 2]
+    assert convert.plan_ids_from_segments(msg.segments).tolist() == [1, 1, 2]
     back = convert.history_from_segments(msg.segments)
     np.testing.assert_array_equal(back.a, history.a)
     np.testing.assert_array_equal(back.b, history.b)

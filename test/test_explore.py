@@ -35,6 +35,20 @@ def test_infeasible_episode_gives_up():
     assert result.cycles_log[-1].plan.decision == "give_up"
 
 
+def test_infeasible_three_ledges_gives_up_once_its_slides_rule_out_every_hold():
+    # benchmark truth 19: single samples with a short level edge between two observations of
+    # one slide kept P_dock at 1/N = 0.01 for three more cycles before core.slides
+    problem = problems.get("three_ledges")
+    index = problems.names().index("three_ledges")
+    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 19]))
+    assert not simulate.feasible(problem, truth)
+    rng = np.random.default_rng([0, index, 19, 1])
+    result = explore.run_episode(problem, truth, "ours", rng, 8)
+    assert result.outcome == "gave_up", result.message
+    assert result.cycles <= 5
+    assert sum(c.rejected for c in result.cycles_log) > 0
+
+
 def test_same_seed_same_episode():
     problem, truth = _truth("sloper", False)
     runs = [explore.run_episode(problem, truth, "ours", np.random.default_rng(5), 6) for _ in "ab"]

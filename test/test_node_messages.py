@@ -260,3 +260,25 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
             executor, lambda: statuses and statuses[-1].message.startswith("GAVE_UP"), 10.0
         )
     assert "no shape consistent" in statuses[-1].message and not plans
+
+
+def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):
+    from tactile_dock_ros.msg import ContactHistory
+    from test_slides import LOAD, MU, level_edge, slide_probes, slope_shape
+
+    from tactile_dock_ros.core.shape import GaussianShape
+
+    spec = launch_nodes("mock")["planner"]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
+        assert spin_until(executor, lambda: history.get_subscription_count() > 0, 10.0)
+        slope = slope_shape()
+        slide = slide_probes(slope, [3, 1])  # one slide: the plan id of both rows is 4
+        history.publish(convert.history_to_msg(slide, convert.Header(), plan_ids=[4, 4]))
+        assert spin_until(executor, lambda: node.history is not None, 10.0)
+        assert node.history_plan_ids.tolist() == [4, 4]
+        node.prior = GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), False, MU)
+        node.tool, node.load = np.array([0.05, 0.2]), LOAD
+        up = np.array([0.0, 1e-3])
+        result = node.plan(np.stack([slope, slope + up, slope - up, level_edge(slope, 2)]))
+        assert result.rejected == 1 and result.decision == "give_up", result.reason

@@ -37,6 +37,7 @@ class CycleLog:
     inference_seconds: float
     planning_seconds: float
     dropped: int  # observations the sampler ignored as inconsistent
+    rejected: int  # posterior samples on which a recorded slide could not have happened
     history_length: int  # observations available when this cycle planned
 
 
@@ -78,7 +79,8 @@ def run_episode(
 
     ``rng`` drives every random choice (default: ``np.random.default_rng(0)``), so the same
     seed gives the same episode. Posterior chains are warm-started from the previous cycle's
-    samples (``sampling.sample_posterior(init_z=...)``).
+    samples (``sampling.sample_posterior(init_z=...)``). The planner gets each row's cycle, so
+    it drops samples on which a recorded compliant slide could not have happened (``slides``).
     """
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose from {STRATEGIES}")
@@ -87,6 +89,7 @@ def run_episode(
     rng = np.random.default_rng(0) if rng is None else rng
     prior = problem.prior
     history = History()
+    move_ids = np.zeros(0, dtype=int)  # the cycle that observed each history row
     log: list[CycleLog] = []
     targets = np.zeros((0, 2))
     tool = np.asarray(problem.start, float)
@@ -113,6 +116,7 @@ def run_episode(
                 give_up_threshold,
                 objective=_objective(strategy, cycle),
                 compliant=compliant,
+                move_ids=move_ids,
             )
             t2 = time.perf_counter()
             entry = dict(
@@ -122,6 +126,7 @@ def run_episode(
                 inference_seconds=t1 - t0,
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
+                rejected=decision.rejected,
                 history_length=len(history),
             )
             if decision.decision == "give_up":
@@ -147,6 +152,7 @@ def run_episode(
                     ground_truth, prior.closed, run, problem.load, problem.contact_resolution
                 )
             history = history.extend(evidence.a, evidence.b, evidence.status)
+            move_ids = np.concatenate([move_ids, np.full(len(evidence), cycle)])
             targets = np.vstack([targets, decision.target_point])
             tool = _backed_off(run, decision.path, problem.contact_resolution)
             if run.docked:

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import probsim, simulate
+from . import probsim, simulate, slides
 from .freespace import FreeSpace, likely_obstacle_region
 from .shape import GaussianShape
 
@@ -82,6 +82,7 @@ class Plan:
     reason: str
     target_point: np.ndarray  # (2,) aimed-at expected edge midpoint (NaN on give-up)
     candidates: Candidates | None = None
+    rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
 
 
 def exploration_bonus(aim: np.ndarray, previous: np.ndarray, width: float) -> np.ndarray:
@@ -249,8 +250,10 @@ def score(
     raise ValueError(f"unknown objective {objective!r}; choose from {OBJECTIVES}")
 
 
-def _give_up(reason: str, candidates: Candidates | None = None) -> Plan:
-    return Plan("give_up", np.zeros((0, 2)), 0.0, 0.0, -1, reason, np.full(2, np.nan), candidates)
+def _give_up(rejected: int, reason: str, candidates: Candidates | None = None) -> Plan:
+    return Plan(
+        "give_up", np.zeros((0, 2)), 0.0, 0.0, -1, reason, np.full(2, np.nan), candidates, rejected
+    )
 
 
 def _check_inputs(samples, shape, start, load, friction, contact_resolution, threshold):
@@ -286,14 +289,15 @@ def plan(
     objective: str = "ours",
     compliant: bool = True,
     max_path_attempts: int = 20,
+    move_ids=None,
 ) -> Plan:
     """Best docking plan for posterior vertex samples (N, n, 2), or a give-up (Sec. V-B).
 
     Args:
         samples: posterior vertex samples; their moment fit is the Gaussian of the estimate.
         shape: prior (topology: ``closed``, edges; vertex count).
-        history: the observations the samples are conditioned on. The samples already carry
-            them, so the planner does not read it (kept for the contract's signature).
+        history: the observations the samples are conditioned on. The samples already satisfy
+            each one (eq. 13); the planner reads it only for the slides (``move_ids``).
         start: current tool position, metres.
         load: unit push direction of the loading move (normalized here).
         friction: Coulomb coefficient.
@@ -303,6 +307,9 @@ def plan(
         objective: one of ``OBJECTIVES`` (see ``score``).
         compliant: motion model of the probabilistic simulation.
         max_path_attempts: at most this many candidates are path-planned before giving up.
+        move_ids: (k,) the move (plan id) that observed each history row. With it, samples on
+            which a recorded compliant slide could not have happened are dropped first
+            (``slides.keep_consistent``; ``Plan.rejected`` counts them).
 
     Raises ValueError on malformed input; an infeasible situation is a give-up with a reason.
     """
@@ -311,25 +318,34 @@ def plan(
     load = np.asarray(load, float).reshape(-1)
     _check_inputs(samples, shape, start, load, friction, contact_resolution, give_up_threshold)
     load = load / np.linalg.norm(load)
+    rejected = 0
+    if move_ids is not None and history is not None:
+        samples, rejected = slides.keep_consistent(
+            samples, shape.closed, history, move_ids, load, friction
+        )
     step = 0.5 * contact_resolution
     lor = likely_obstacle_region(samples, shape.edges, margin=step)
     space = FreeSpace(lor, samples.mean(axis=0), shape.closed, start)
     segments = terminal_segments(samples, shape.edges, load, space, step)
     if len(segments["edges"]) == 0:
-        return _give_up("no edge of the shape faces the load direction")
+        return _give_up(rejected, "no edge of the shape faces the load direction")
     posterior = GaussianShape.from_samples(samples, shape.closed, friction)
     holding = holding_frequencies(samples, shape.closed, load, friction)
     candidates = evaluate(posterior, segments, load, compliant, holding)
     best = float(candidates.p_dock.max())
     if best < give_up_threshold:
         return _give_up(
-            f"best docking probability {best:.2e} < threshold {give_up_threshold:g}", candidates
+            rejected,
+            f"best docking probability {best:.2e} < threshold {give_up_threshold:g}",
+            candidates,
         )
     lead = np.array([start])
     if space.blocked(start)[0]:
         lead = space.ascend(start, step)
         if lead is None:
-            return _give_up("the tool is inside the likely-obstacle region with no way out")
+            return _give_up(
+                rejected, "the tool is inside the likely-obstacle region with no way out"
+            )
     values = score(candidates, objective, previous_targets, contact_resolution, give_up_threshold)
     order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
     for j in order[:max_path_attempts]:
@@ -359,7 +375,10 @@ def plan(
             f"{objective}: edge {candidates.edges[j]} with P_dock {p_dock:.3f}",
             candidates.aim[j],
             candidates,
+            rejected,
         )
     if not order:
-        return _give_up(f"no candidate site scores above 0 under {objective!r}", candidates)
-    return _give_up("no collision-free prefix to any promising docking site", candidates)
+        return _give_up(
+            rejected, f"no candidate site scores above 0 under {objective!r}", candidates
+        )
+    return _give_up(rejected, "no collision-free prefix to any promising docking site", candidates)

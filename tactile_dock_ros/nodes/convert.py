@@ -216,6 +216,11 @@ def history_from_segments(segments) -> History:
         raise MessageError(str(err)) from err
 
 
+def plan_ids_from_segments(segments) -> np.ndarray:
+    """(k,) the plan that observed each ContactSegment (the planner's slides, core.slides)."""
+    return np.array([s.plan_id for s in segments], dtype=int)
+
+
 def history_to_msg(history: History, header: Header, plan_ids=0) -> ContactHistory:
     return ContactHistory(header=header, segments=segments_to_msgs(history, header, plan_ids))
 

@@ -72,6 +72,7 @@ class PlannerNode(Node):
         self.prior = None
         self.tool = None
         self.history = None
+        self.history_plan_ids = np.zeros(0, int)  # per history row: the plan that observed it
         self.samples = None  # (msg, vertices) of the newest samples
         self.episode = 0
         self.state = IDLE
@@ -112,6 +113,7 @@ class PlannerNode(Node):
 
     def on_history(self, msg: ContactHistory) -> None:
         self.history = convert.history_from_segments(msg.segments)
+        self.history_plan_ids = convert.plan_ids_from_segments(msg.segments)
         self.maybe_plan()
 
     def on_samples(self, msg: ShapeSamples) -> None:
@@ -267,6 +269,7 @@ class PlannerNode(Node):
             np.array(self.targets).reshape(-1, 2),
             give_up_threshold=self.p.give_up_threshold,
             compliant=self.p.compliant,
+            move_ids=self.history_plan_ids,
         )
 
     # ------------------------------------------------------------------ episode status

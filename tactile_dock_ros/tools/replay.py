@@ -46,6 +46,7 @@ class Cycle:
     episode: int  # the planner's episode id
     prior: GaussianShape
     history: History
+    plan_ids: np.ndarray  # (k,) the plan that observed each history row (its slides)
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
     previous_targets: np.ndarray  # (k, 2) aim points of the episode's earlier DOCK plans
     recorded: object  # nodes.convert.PlanCommand
@@ -72,7 +73,7 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
     """
     from ..nodes import convert
 
-    prior = history = None
+    prior = history = plan_ids = None
     samples: dict[int, np.ndarray] = {}  # history length -> newest samples
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
     seen, targets, pending = set(), [], []
@@ -82,6 +83,7 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
             prior = convert.shape_from_msg(msg)
         elif topic == "/contact_history":
             history = convert.history_from_segments(msg.segments)
+            plan_ids = convert.plan_ids_from_segments(msg.segments)
         elif topic == "/shape_samples" and msg.num_samples > 0:
             samples[int(msg.history_length)] = convert.samples_from_msg(msg)
         elif topic == "/execution_report":
@@ -105,13 +107,21 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
                 log(f"episode {episode} plan {command.plan_id}: skipped, no tool position")
                 continue
             pending.append(
-                (episode, prior, history, samples[len(history)], np.array(targets), command)
+                (
+                    episode,
+                    prior,
+                    history,
+                    plan_ids,
+                    samples[len(history)],
+                    np.array(targets),
+                    command,
+                )
             )
             if command.dock:
                 targets = [*targets, command.target_point]
     cycles = [
-        Cycle(e, pr, h, s, t.reshape(-1, 2), c, reports.get((e, c.plan_id), "-"))
-        for e, pr, h, s, t, c in pending
+        Cycle(e, pr, h, ids, s, t.reshape(-1, 2), c, reports.get((e, c.plan_id), "-"))
+        for e, pr, h, ids, s, t, c in pending
     ]
     if not cycles:
         raise bag.BagError(f"{path}: no plan with its inputs recorded (topics: /plan, ...)")
@@ -132,6 +142,7 @@ def replan(cycle: Cycle, settings: Settings, samples: np.ndarray | None = None) 
         cycle.previous_targets,
         give_up_threshold=settings.give_up_threshold,
         compliant=compliant,
+        move_ids=cycle.plan_ids,
     )
 
 

@@ -1,0 +1,96 @@
+"""A compliant slide as one piece of evidence (Sec. V-A2 motion model, Sec. III-B).
+
+A slipping loading contact under compliance slides along the surface, in the slip direction,
+until it sticks at a feature or separates. The history records the slide as slip observations
+(eq. 13): the first contact, then one at the middle of every edge the trace crossed
+(``explore.slide_evidence``, the executor's ``crossed_pieces``). Each observation constrains
+only the edge it lands on, so a posterior sample may put a short edge that holds the load
+between two of them (three_ledges: ~1 % of the samples on a ledge the tool had slid down, which
+kept infeasible episodes from giving up). The slide says more: the tool passed over every edge
+from the first contact's edge to the last observation's edge, so each of them faced the load
+and slipped the same way. ``consistent_with_slides`` checks that for every sample; the caller
+keeps the consistent samples, i.e. conditions the posterior on the whole slide by rejection.
+The ground truth always passes (its slide produced the observations).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import simulate
+from .history import History, Status
+
+SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
+
+
+def slide_groups(history: History, move_ids) -> list[np.ndarray]:
+    """Row indices of each slide: the slip rows of one move (``move_ids`` (k,), e.g. the plan
+    id of every row) with one slip status, in history order (first contact first). Slides of
+    a single row say nothing beyond eq. 13 and are left out."""
+    move_ids = np.asarray(move_ids).reshape(-1)
+    if len(move_ids) != len(history):
+        raise ValueError(f"move_ids has {len(move_ids)} entries for {len(history)} history rows")
+    slip = np.isin(history.status, list(SLIP))
+    keys = np.unique(np.stack([move_ids[slip], history.status[slip]], axis=1), axis=0)
+    groups = [
+        np.flatnonzero(slip & (move_ids == move) & (history.status == status))
+        for move, status in keys
+    ]
+    return [g for g in groups if len(g) >= 2]
+
+
+def consistent_with_slides(
+    vertices: np.ndarray, closed: bool, history: History, move_ids, load, friction: float
+) -> np.ndarray:
+    """(N,) whether each sample (N, n, 2) lets every recorded slide happen.
+
+    For a slide with rows r_0 (first contact) .. r_k: the edge each row's segment lands on
+    (first crossing, eqs. 4-10) must lie at or beyond r_0's edge in the slide direction, and
+    every edge from r_0's edge to the farthest of them must face the load and slip that way
+    (eq. 12's cones), so no edge sticks and no vertex traps on the way. A row that lands on no
+    edge fails the sample.
+    """
+    vertices = np.asarray(vertices, float)
+    ok = np.ones(len(vertices), dtype=bool)
+    groups = slide_groups(history, move_ids)
+    if not groups or not len(vertices):
+        return ok
+    n = vertices.shape[1]
+    edges, _, _ = simulate.edge_index_arrays(n, closed)
+    count = len(edges)
+    c, d = vertices[:, edges[:, 0]], vertices[:, edges[:, 1]]
+    flags = simulate.friction_functionals(load, friction) @ np.moveaxis(d - c, -1, -2) > 0.0
+    slip_left, slip_right, faces = flags[:, 0], flags[:, 1], flags[:, 2]  # (N, E) each
+    rows = np.concatenate(groups)
+    hosts = np.empty((len(vertices), len(rows)), dtype=int)
+    landed = np.empty((len(vertices), len(rows)), dtype=bool)
+    for j, row in enumerate(rows):  # one exact crossing test per slide row, over all samples
+        landed[:, j], hosts[:, j], _, _ = simulate.first_hits(c, d, history.a[row], history.b[row])
+    ok &= landed.all(axis=1)
+    start = 0
+    for group in groups:
+        h = hosts[:, start : start + len(group)]
+        start += len(group)
+        step = SLIP[Status(int(history.status[group[0]]))]
+        offset = step * (h - h[:, :1])
+        if closed:
+            offset %= count
+        ok &= np.all(offset >= 0, axis=1)
+        along = step * (np.arange(count)[None, :] - h[:, :1])
+        if closed:
+            along %= count
+        span = (along >= 0) & (along <= offset.max(axis=1, keepdims=True))
+        carries = faces & (slip_right if step > 0 else slip_left)
+        ok &= ~np.any(span & ~carries, axis=1)
+    return ok
+
+
+def keep_consistent(
+    vertices: np.ndarray, closed: bool, history: History, move_ids, load, friction: float
+) -> tuple[np.ndarray, int]:
+    """The samples (N, n, 2) on which every slide could have happened, and how many were
+    rejected. Decision: when fewer than two pass (a moment fit needs two), all are kept and the
+    count still says how many failed."""
+    keep = consistent_with_slides(vertices, closed, history, move_ids, load, friction)
+    rejected = int(len(keep) - keep.sum())
+    return (vertices[keep] if keep.sum() >= 2 else vertices), rejected

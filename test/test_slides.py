@@ -1,0 +1,110 @@
+"""A compliant slide as evidence (core.slides): the truth passes, a hold on the way fails."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_dock_ros.core import explore, planner, problems, simulate, slides
+from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.shape import GaussianShape
+
+LOAD, MU, STEP = np.array([0.0, -1.0]), 0.5, 0.025
+
+
+def slope_shape(n=7, degrees=40.0):
+    """A straight slope falling to the right (+x), steeper than the friction angle (26.6 deg),
+    numbered right to left (solid below it): a slide down it runs to lower edge indices."""
+    x = -np.arange(n) * STEP
+    return np.stack([x, -np.tan(np.radians(degrees)) * x], axis=1)
+
+
+def slide_probes(vertices, edges):
+    """Long vertical slip-left (down the slope) observations through the middles of ``edges``,
+    in this order."""
+    mid = 0.5 * (vertices[edges] + vertices[np.asarray(edges) + 1])
+    up = np.array([0.0, 0.05])
+    return History(mid + up, mid - up, np.full(len(mid), Status.SLIP_LEFT))
+
+
+def level_edge(vertices, edge):
+    """The slope with ``edge`` made level (it then holds the load); later vertices move down."""
+    out = vertices.copy()
+    out[edge + 1 :, 1] += vertices[edge, 1] - vertices[edge + 1, 1]
+    return out
+
+
+def test_a_level_edge_between_two_slide_observations_fails_the_sample():
+    slope = slope_shape()
+    history = slide_probes(slope, [3, 1])  # edge 2 in between carries no observation
+    flat = level_edge(slope, 2)
+    samples = np.stack([slope, flat])
+    one_slide = slides.consistent_with_slides(samples, False, history, [7, 7], LOAD, MU)
+    assert one_slide.tolist() == [True, False]
+    # as two separate moves the observations say nothing about edge 2
+    two_moves = slides.consistent_with_slides(samples, False, history, [7, 8], LOAD, MU)
+    assert two_moves.tolist() == [True, True]
+    kept, rejected = slides.keep_consistent(samples, False, history, [7, 7], LOAD, MU)
+    assert rejected == 1 and len(kept) == 2  # fewer than two pass: all kept, count reported
+
+
+def test_a_slide_that_runs_backwards_fails():
+    slope = slope_shape()
+    backwards = slide_probes(slope, [1, 3])  # the first contact below the later one
+    ok = slides.consistent_with_slides(slope[None], False, backwards, [1, 1], LOAD, MU)
+    assert not ok[0]
+
+
+def test_a_closed_shape_checks_the_slide_across_its_first_vertex():
+    slope = slope_shape()
+    closed = np.vstack([slope, [[slope[-1, 0], -1.0], [0.0, -1.0]]])  # the solid under it
+    history = slide_probes(slope, [3, 1])
+    for roll in range(len(closed)):  # every numbering, including the span wrapping to index 0
+        good = np.roll(closed, roll, axis=0)
+        flat = np.roll(np.vstack([level_edge(slope, 2), closed[len(slope) :]]), roll, axis=0)
+        ok = slides.consistent_with_slides(np.stack([good, flat]), True, history, [0, 0], LOAD, MU)
+        assert ok.tolist() == [True, False], roll
+
+
+def test_rows_without_a_slide_leave_every_sample():
+    slope = slope_shape()
+    history = slide_probes(slope, [3, 1]).extend([[0.0, 0.1]], [[0.0, 0.2]], [Status.FREE])
+    flat = level_edge(slope, 2)
+    ok = slides.consistent_with_slides(np.stack([slope, flat]), False, history, [1, 2, 3], LOAD, MU)
+    assert ok.all()
+    assert slides.slide_groups(history, [1, 2, 3]) == []
+
+
+def test_move_ids_must_match_the_history():
+    with pytest.raises(ValueError, match="move_ids has 1 entries for 2 history rows"):
+        slides.consistent_with_slides(
+            slope_shape()[None], False, slide_probes(slope_shape(), [1, 3]), [1], LOAD, MU
+        )
+
+
+@settings(max_examples=25, deadline=None)
+@given(truth_seed=st.integers(0, 10_000), x=st.floats(-0.6, 0.3))
+def test_the_truth_always_passes_its_own_slides(truth_seed, x):
+    problem = problems.get("three_ledges")
+    truth = problem.sample_ground_truth(np.random.default_rng(truth_seed))
+    path = np.array([[x, 0.8], [x, -0.8]])
+    run = simulate.guarded_path(truth, False, path, problem.friction, problem.load, True, 0.01)
+    evidence = explore.slide_evidence(truth, False, run, problem.load, 0.01)
+    ok = slides.consistent_with_slides(
+        truth[None], False, evidence, np.zeros(len(evidence)), problem.load, problem.friction
+    )
+    assert ok[0]
+
+
+def test_planner_drops_the_samples_a_slide_rules_out():
+    slope = slope_shape()
+    history = slide_probes(slope, [3, 1])
+    flat = level_edge(slope, 2)
+    up = np.array([0.0, 1e-3])
+    samples = np.stack([slope, slope + up, slope - up, flat])
+    prior = GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), closed=False, friction=MU)
+    args = (samples, prior, history, [0.05, 0.2], LOAD, MU, 0.01)
+    blind = planner.plan(*args)
+    assert blind.rejected == 0 and blind.decision == "dock"  # the level edge holds in 1 of 4
+    informed = planner.plan(*args, move_ids=[3, 3])
+    assert informed.rejected == 1 and informed.decision == "give_up", informed.reason
