@@ -64,6 +64,7 @@ def build() -> dict:
             header=_header(4),
             episode=1795315710,
             plan_id=42,
+            history_length=17,
             decision=DockingPlan.GIVE_UP,
             waypoints=[Point(x=1.0, y=2.0, z=0.0), Point(x=1.5, y=1.0, z=0.0)],
             load_direction=Vector3(x=0.6, y=-0.8, z=0.0),

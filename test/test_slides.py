@@ -44,6 +44,8 @@ def test_a_level_edge_between_two_slide_observations_fails_the_sample():
     # as two separate moves the observations say nothing about edge 2
     two_moves = slides.consistent_with_slides(samples, False, history, [7, 8], LOAD, MU)
     assert two_moves.tolist() == [True, True]
+    unknown = slides.consistent_with_slides(samples, False, history, [0, 0], LOAD, MU)
+    assert unknown.tolist() == [True, True]  # rows without a plan id form no slide
     kept, rejected = slides.keep_consistent(samples, False, history, [7, 7], LOAD, MU)
     assert rejected == 1 and len(kept) == 2  # fewer than two pass: all kept, count reported
 
@@ -62,7 +64,7 @@ def test_a_closed_shape_checks_the_slide_across_its_first_vertex():
     for roll in range(len(closed)):  # every numbering, including the span wrapping to index 0
         good = np.roll(closed, roll, axis=0)
         flat = np.roll(np.vstack([level_edge(slope, 2), closed[len(slope) :]]), roll, axis=0)
-        ok = slides.consistent_with_slides(np.stack([good, flat]), True, history, [0, 0], LOAD, MU)
+        ok = slides.consistent_with_slides(np.stack([good, flat]), True, history, [2, 2], LOAD, MU)
         assert ok.tolist() == [True, False], roll
 
 
@@ -91,7 +93,7 @@ def test_the_truth_always_passes_its_own_slides(truth_seed, x):
     run = simulate.guarded_path(truth, False, path, problem.friction, problem.load, True, 0.01)
     evidence = explore.slide_evidence(truth, False, run, problem.load, 0.01)
     ok = slides.consistent_with_slides(
-        truth[None], False, evidence, np.zeros(len(evidence)), problem.load, problem.friction
+        truth[None], False, evidence, np.ones(len(evidence)), problem.load, problem.friction
     )
     assert ok[0]
 

@@ -89,7 +89,7 @@ def run_episode(
     rng = np.random.default_rng(0) if rng is None else rng
     prior = problem.prior
     history = History()
-    move_ids = np.zeros(0, dtype=int)  # the cycle that observed each history row
+    move_ids = np.zeros(0, dtype=int)  # per history row: the cycle that observed it, from 1
     log: list[CycleLog] = []
     targets = np.zeros((0, 2))
     tool = np.asarray(problem.start, float)
@@ -152,7 +152,7 @@ def run_episode(
                     ground_truth, prior.closed, run, problem.load, problem.contact_resolution
                 )
             history = history.extend(evidence.a, evidence.b, evidence.status)
-            move_ids = np.concatenate([move_ids, np.full(len(evidence), cycle)])
+            move_ids = np.concatenate([move_ids, np.full(len(evidence), cycle + 1)])
             targets = np.vstack([targets, decision.target_point])
             tool = _backed_off(run, decision.path, problem.contact_resolution)
             if run.docked:

@@ -307,7 +307,8 @@ def plan(
         objective: one of ``OBJECTIVES`` (see ``score``).
         compliant: motion model of the probabilistic simulation.
         max_path_attempts: at most this many candidates are path-planned before giving up.
-        move_ids: (k,) the move (plan id) that observed each history row. With it, samples on
+        move_ids: (k,) the move (plan id, from 1; 0 unknown) that observed each history row;
+            with it, samples on
             which a recorded compliant slide could not have happened are dropped first
             (``slides.keep_consistent``; ``Plan.rejected`` counts them).
 

@@ -26,11 +26,12 @@ SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the sl
 def slide_groups(history: History, move_ids) -> list[np.ndarray]:
     """Row indices of each slide: the slip rows of one move (``move_ids`` (k,), e.g. the plan
     id of every row) with one slip status, in history order (first contact first). Slides of
-    a single row say nothing beyond eq. 13 and are left out."""
+    a single row say nothing beyond eq. 13 and are left out, and so are rows whose move is
+    unknown (id <= 0: plan ids start at 1, a ContactSegment without one carries 0)."""
     move_ids = np.asarray(move_ids).reshape(-1)
     if len(move_ids) != len(history):
         raise ValueError(f"move_ids has {len(move_ids)} entries for {len(history)} history rows")
-    slip = np.isin(history.status, list(SLIP))
+    slip = np.isin(history.status, list(SLIP)) & (move_ids > 0)
     keys = np.unique(np.stack([move_ids[slip], history.status[slip]], axis=1), axis=0)
     groups = [
         np.flatnonzero(slip & (move_ids == move) & (history.status == status))

@@ -287,6 +287,7 @@ class PlanCommand:
     reason: str
     target_point: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # (2,) metres
     episode: int = 0
+    history_length: int = 0  # contact_history segments the plan was made on
 
 
 def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
@@ -294,6 +295,7 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
         header=header,
         episode=int(command.episode),
         plan_id=int(command.plan_id),
+        history_length=int(command.history_length),
         decision=DockingPlan.DOCK if command.dock else DockingPlan.GIVE_UP,
         waypoints=[_point(w) for w in command.waypoints],
         load_direction=vector3(command.load),
@@ -349,6 +351,7 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
         reason=msg.reason,
         target_point=np.array([msg.target_point.x, msg.target_point.y], float),
         episode=int(msg.episode),
+        history_length=int(msg.history_length),
     )
 
 

@@ -231,6 +231,7 @@ class PlannerNode(Node):
             reason=result.reason,
             target_point=result.target_point,
             episode=self.episode,
+            history_length=len(self.history),
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
         self.cycles.append(

@@ -7,16 +7,17 @@
 BAG is a rosbag2 directory with the topics of ``tools.bag.EPISODE_TOPICS`` (record them on the
 robot with ``ros2 bag record``; ``make demo DEMO_ARGS="--bag DIR"`` records the mock episode).
 For each recorded plan (one per cycle; the planner's resent copies are skipped) the planner
-node's inputs are rebuilt: the prior, the posterior samples it planned with (the newest
-``/shape_samples`` conditioned on the whole history), the contact history, the tool position
-(the plan's first waypoint) and the aim points of the episode's earlier plans (eq. 24). Then
-``core.planner.plan`` runs again with the planner parameters of ``--config`` (the parameter file
-the robot ran with; the planner node's defaults otherwise), the load direction and motion model
-of the recorded plan, and any override given here. The planner is deterministic: with the
-recorded parameters every replayed plan equals the recorded one, so a difference means the code
-or a parameter changed. ``--resample N`` plans with N fresh posterior samples instead
-(``core.sampling.sample_posterior`` from the prior and history, cold-started, seeded), which
-separates inference noise from planning. Exit status 0 when every cycle was replayed.
+node's inputs are rebuilt: the prior, the posterior samples it planned with and the contact
+history (those of the plan's ``history_length`` stamped last before it, ``load_cycles``), the
+tool position (the plan's first waypoint) and the aim points of the episode's earlier plans (eq.
+24). Then ``core.planner.plan`` runs again with the planner parameters of ``--config`` (the
+parameter file the robot ran with; the planner node's defaults otherwise), the load direction
+and motion model of the recorded plan, and any override given here. The planner is
+deterministic: with the recorded parameters every replayed plan equals the recorded one, so a
+difference means the code or a parameter changed. ``--resample N`` plans with N fresh posterior
+samples instead (``core.sampling.sample_posterior`` from the prior and history, cold-started,
+seeded), which separates inference noise from planning. Exit status 0 when every cycle was
+replayed.
 """
 
 from __future__ import annotations
@@ -66,63 +67,72 @@ class Settings:
     compliant: bool | None  # None: as recorded in each plan
 
 
+def _stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+def _latest(items: list, stamp_ns: int):
+    """Of ``items`` [(header stamp ns, value)], the one stamped last at or before ``stamp_ns``,
+    or None. Decision: header stamps, not bag order: a recorder orders the messages of one
+    topic, not across topics, so samples may be recorded after the plan made from them."""
+    before = [(t, i) for i, (t, _) in enumerate(items) if t <= stamp_ns]
+    return items[max(before)[1]][1] if before else None
+
+
 def load_cycles(path: Path, log=print) -> list[Cycle]:
     """The cycles of every episode in the bag at ``path``, in order.
 
-    Raises ``bag.BagError`` when the bag cannot be read or holds no plan with its inputs.
+    A plan's inputs are the prior and the ``/contact_history`` and ``/shape_samples`` of the
+    length the plan records (``DockingPlan.history_length``), each the one stamped last at or
+    before the plan. Raises ``bag.BagError`` when the bag cannot be read or holds no plan with
+    its inputs.
     """
     from ..nodes import convert
 
-    prior = history = plan_ids = None
-    samples: dict[int, np.ndarray] = {}  # history length -> newest samples
+    priors: list = []
+    histories: dict[int, list] = {}  # length -> [(stamp, (History, plan ids))]
+    samples: dict[int, list] = {}  # history length -> [(stamp, (N, n, 2) vertices)]
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
-    seen, targets, pending = set(), [], []
-    episode = None
+    plans, seen = [], set()
     for topic, _, msg in bag.read(path):
         if topic == "/terrain_prior":
-            prior = convert.shape_from_msg(msg)
+            priors.append((_stamp_ns(msg), convert.shape_from_msg(msg)))
         elif topic == "/contact_history":
             history = convert.history_from_segments(msg.segments)
-            plan_ids = convert.plan_ids_from_segments(msg.segments)
+            ids = convert.plan_ids_from_segments(msg.segments)
+            histories.setdefault(len(history), []).append((_stamp_ns(msg), (history, ids)))
         elif topic == "/shape_samples" and msg.num_samples > 0:
-            samples[int(msg.history_length)] = convert.samples_from_msg(msg)
+            vertices = convert.samples_from_msg(msg)
+            samples.setdefault(int(msg.history_length), []).append((_stamp_ns(msg), vertices))
         elif topic == "/execution_report":
             report = convert.report_from_msg(msg)
             reports[(report.episode, report.plan_id)] = report.outcome_name
         elif topic == "/plan":
             key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
-            if key in seen:
-                continue  # the planner resends a plan until its report arrives
-            seen.add(key)
-            command = convert.plan_from_msg(msg)
-            if command.episode != episode:
-                episode, targets = command.episode, []
-            if prior is None or history is None or len(history) not in samples:
-                log(
-                    f"episode {episode} plan {command.plan_id}: skipped, its prior, history or "
-                    "samples are not in the bag"
-                )
-                continue
-            if len(command.waypoints) == 0:
-                log(f"episode {episode} plan {command.plan_id}: skipped, no tool position")
-                continue
-            pending.append(
-                (
-                    episode,
-                    prior,
-                    history,
-                    plan_ids,
-                    samples[len(history)],
-                    np.array(targets),
-                    command,
-                )
+            if key not in seen:  # the planner resends a plan until its report arrives
+                seen.add(key)
+                plans.append((_stamp_ns(msg), convert.plan_from_msg(msg)))
+    cycles, episode, targets = [], None, []
+    for stamp, command in plans:
+        if command.episode != episode:
+            episode, targets = command.episode, []
+        previous = np.array(targets).reshape(-1, 2)
+        if command.dock:
+            targets = [*targets, command.target_point]
+        prior = _latest(priors, stamp)
+        recorded = _latest(histories.get(command.history_length, []), stamp)
+        vertices = _latest(samples.get(command.history_length, []), stamp)
+        if prior is None or recorded is None or vertices is None:
+            log(
+                f"episode {episode} plan {command.plan_id}: skipped, its prior, history or "
+                f"samples (history length {command.history_length}) are not in the bag"
             )
-            if command.dock:
-                targets = [*targets, command.target_point]
-    cycles = [
-        Cycle(e, pr, h, ids, s, t.reshape(-1, 2), c, reports.get((e, c.plan_id), "-"))
-        for e, pr, h, ids, s, t, c in pending
-    ]
+            continue
+        if len(command.waypoints) == 0:
+            log(f"episode {episode} plan {command.plan_id}: skipped, no tool position")
+            continue
+        outcome = reports.get((episode, command.plan_id), "-")
+        cycles.append(Cycle(episode, prior, *recorded, vertices, previous, command, outcome))
     if not cycles:
         raise bag.BagError(f"{path}: no plan with its inputs recorded (topics: /plan, ...)")
     return cycles
