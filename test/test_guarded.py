@@ -122,10 +122,15 @@ def test_crossed_pieces_are_the_edges_between_the_trace_corners():
         [np.linspace(p, q, 20, endpoint=False) for p, q in itertools.pairwise(corner)]
     )
     trace = np.vstack([dense, corner[-1:]])
-    middles = crossed_pieces(trace, 0.01)
+    right = np.array([1.0, 0.0])  # a slide down to the right pushed along -y: SLIP_LEFT
+    middles = crossed_pieces(trace, 0.01, right)
     np.testing.assert_allclose(middles, [[0.15, -0.2], [0.225, -0.3]], atol=1e-9)
-    assert len(crossed_pieces(np.linspace([0, 0], [0.1, -0.1], 30), 0.01)) == 0  # one piece
-    assert len(crossed_pieces(trace, 0.06)) == 1  # the 5 cm last piece is below resolution
+    assert len(crossed_pieces(np.linspace([0, 0], [0.1, -0.1], 30), 0.01, right)) == 0  # 1 piece
+    assert len(crossed_pieces(trace, 0.06, right)) == 1  # the 5 cm last piece is below resolution
+    # past the lip the arm's lateral spring pulls the tool back down an undercut: not a slide
+    undercut = np.vstack([trace, np.linspace([0.25, -0.3], [0.2, -0.4], 20)[1:]])
+    np.testing.assert_allclose(crossed_pieces(undercut, 0.01, right), middles, atol=1e-9)
+    assert len(crossed_pieces(trace, 0.01, -right)) == 0  # none of it slid the other way
 
 
 def test_compliant_plan_sticks_at_once_on_a_floor_and_bounds_long_slides():
@@ -263,3 +268,28 @@ def test_tool_slides_off_the_end_of_an_open_polyline():
     for _ in range(700):
         sim.step([0.0, -0.1], DT)
     assert sim.tool[1] < -0.2 and np.linalg.norm(sim.force) < 1e-9  # free, past the end
+
+
+def test_compliant_slides_over_overhanging_lips_report_only_what_the_truth_shows():
+    # sloper's holds overhang: past the lip the arm's lateral spring pulls the tool down the
+    # undercut, which must not be reported as more slip along the slope
+    from tactile_dock_ros.core import problems, slides
+
+    problem, rng = problems.get("sloper"), np.random.default_rng(7)
+    slid_far = 0
+    for _ in range(20):
+        truth = problem.sample_ground_truth(rng)
+        truth = truth - 0.5 * (truth.min(0) + truth.max(0))
+        lo, hi = truth.min(0), truth.max(0)
+        limits = Limits(lo - 0.5, hi + 0.5, 0.2, 40.0, 0.5)
+        for x in rng.uniform(lo[0], hi[0], 3):
+            path = [[x, hi[1] + 0.05], [x, lo[1] - 0.1]]
+            run, *_ = _execute(truth, path, limits, compliant=True, lateral_stiffness=25.0)
+            history = run.history
+            slip = np.isin(history.status, [Status.SLIP_LEFT, Status.SLIP_RIGHT])
+            slid_far += slip.sum() >= 2
+            ids = np.ones(len(history))
+            assert slides.consistent_with_slides(
+                truth[None], False, history, ids, problem.load, problem.friction
+            )[0]
+    assert slid_far >= 3  # the check saw slides that crossed whole edges

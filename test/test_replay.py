@@ -166,6 +166,34 @@ def test_inputs_that_arrive_after_their_plan_still_match_it(recorded, tmp_path):
     assert all(replay.compare(c, replay.replan(c, DEFAULTS))["same"] for c in cycles)
 
 
+def test_a_clock_offset_never_picks_another_episodes_inputs(recorded, tmp_path, capsys):
+    # inference's clock 2 ms ahead of the planner's in the second episode: its samples are
+    # stamped after the plans made from them, while the first episode has samples of the same
+    # history lengths stamped before
+    messages = []
+    for topic, t, msg in bag.read(recorded):
+        if topic == "/shape_samples" and t >= 10**9:
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + 2_000_000
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
+        messages.append((topic, t, msg))
+    bag.write(tmp_path / "skew", messages)
+    cycles = replay.load_cycles(tmp_path / "skew")
+    assert len(cycles) == 2 * CYCLES
+    assert all(replay.compare(c, replay.replan(c, DEFAULTS))["same"] for c in cycles)
+    assert "stamped after the plan" in capsys.readouterr().out
+
+
+def test_a_bag_of_another_message_version_is_a_clear_error(recorded, monkeypatch):
+    import rclpy.serialization
+
+    def mismatch(raw, cls):
+        raise RuntimeError("failed to deserialize ROS message")
+
+    monkeypatch.setattr(rclpy.serialization, "deserialize_message", mismatch)
+    with pytest.raises(bag.BagError, match="another version of the message"):
+        list(bag.read(recorded))
+
+
 def test_a_changed_parameter_shows_in_the_replay(recorded, tmp_path):
     out = tmp_path / "r.json"
     replay.main([str(recorded), "--give-up-threshold", "0.999", "--json", str(out)])

@@ -46,8 +46,23 @@ def test_a_level_edge_between_two_slide_observations_fails_the_sample():
     assert two_moves.tolist() == [True, True]
     unknown = slides.consistent_with_slides(samples, False, history, [0, 0], LOAD, MU)
     assert unknown.tolist() == [True, True]  # rows without a plan id form no slide
-    kept, rejected = slides.keep_consistent(samples, False, history, [7, 7], LOAD, MU)
-    assert rejected == 1 and len(kept) == 2  # fewer than two pass: all kept, count reported
+
+
+def test_rows_the_sampler_dropped_or_that_land_nowhere_do_not_judge_a_sample():
+    slope = slope_shape()
+    flat = level_edge(slope, 2)
+    history = slide_probes(slope, [3, 1])
+    samples = np.stack([slope, flat])
+    dropped = slides.consistent_with_slides(samples, False, history, [7, 7], LOAD, MU, [1])
+    assert dropped.tolist() == [True, True]  # one row left: no slide
+    # a third row of the slide far off the surface: ignored, the other two still judge
+    astray = history.extend([[1.0, 1.0]], [[1.0, 0.99]], [Status.SLIP_LEFT])
+    ok = slides.consistent_with_slides(samples, False, astray, [7, 7, 7], LOAD, MU)
+    assert ok.tolist() == [True, False]
+    # a first contact that lands nowhere leaves the sample unjudged
+    first_astray = History(astray.a[[2, 0, 1]], astray.b[[2, 0, 1]], astray.status[[2, 0, 1]])
+    ok = slides.consistent_with_slides(samples, False, first_astray, [7, 7, 7], LOAD, MU)
+    assert ok.tolist() == [True, True]
 
 
 def test_a_slide_that_runs_backwards_fails():
@@ -110,3 +125,5 @@ def test_planner_drops_the_samples_a_slide_rules_out():
     assert blind.rejected == 0 and blind.decision == "dock"  # the level edge holds in 1 of 4
     informed = planner.plan(*args, move_ids=[3, 3])
     assert informed.rejected == 1 and informed.decision == "give_up", informed.reason
+    pair = planner.plan(np.stack([slope, flat]), *args[1:], move_ids=[3, 3])
+    assert pair.rejected == 1 and pair.decision == "dock"  # fewer than two pass: all kept

@@ -117,6 +117,7 @@ def run_episode(
                 objective=_objective(strategy, cycle),
                 compliant=compliant,
                 move_ids=move_ids,
+                dropped=post.dropped,
             )
             t2 = time.perf_counter()
             entry = dict(

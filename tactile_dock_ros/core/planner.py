@@ -290,6 +290,7 @@ def plan(
     compliant: bool = True,
     max_path_attempts: int = 20,
     move_ids=None,
+    dropped=(),
 ) -> Plan:
     """Best docking plan for posterior vertex samples (N, n, 2), or a give-up (Sec. V-B).
 
@@ -310,7 +311,10 @@ def plan(
         move_ids: (k,) the move (plan id, from 1; 0 unknown) that observed each history row;
             with it, samples on
             which a recorded compliant slide could not have happened are dropped first
-            (``slides.keep_consistent``; ``Plan.rejected`` counts them).
+            (``slides.consistent_with_slides``; ``Plan.rejected`` counts them). Decision: if
+            fewer than two pass (the moment fit needs two) all are kept; the count tells.
+        dropped: history rows the sampler ignored as inconsistent (``PosteriorSamples.dropped``,
+            ``ShapeSamples.dropped_segments``); they take no part in a slide.
 
     Raises ValueError on malformed input; an infeasible situation is a give-up with a reason.
     """
@@ -321,9 +325,11 @@ def plan(
     load = load / np.linalg.norm(load)
     rejected = 0
     if move_ids is not None and history is not None:
-        samples, rejected = slides.keep_consistent(
-            samples, shape.closed, history, move_ids, load, friction
+        keep = slides.consistent_with_slides(
+            samples, shape.closed, history, move_ids, load, friction, dropped
         )
+        rejected = int(len(keep) - keep.sum())
+        samples = samples[keep] if keep.sum() >= 2 else samples
     step = 0.5 * contact_resolution
     lor = likely_obstacle_region(samples, shape.edges, margin=step)
     space = FreeSpace(lor, samples.mean(axis=0), shape.closed, start)

@@ -23,15 +23,17 @@ from .history import History, Status
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
 
 
-def slide_groups(history: History, move_ids) -> list[np.ndarray]:
+def slide_groups(history: History, move_ids, dropped=()) -> list[np.ndarray]:
     """Row indices of each slide: the slip rows of one move (``move_ids`` (k,), e.g. the plan
-    id of every row) with one slip status, in history order (first contact first). Slides of
-    a single row say nothing beyond eq. 13 and are left out, and so are rows whose move is
-    unknown (id <= 0: plan ids start at 1, a ContactSegment without one carries 0)."""
+    id of every row) with one slip status, in history order (first contact first). Left out:
+    rows whose move is unknown (id <= 0: plan ids start at 1, a ContactSegment without one
+    carries 0), the rows in ``dropped`` (those the sampler ignored as inconsistent), and
+    slides left with a single row (they say nothing beyond eq. 13)."""
     move_ids = np.asarray(move_ids).reshape(-1)
     if len(move_ids) != len(history):
         raise ValueError(f"move_ids has {len(move_ids)} entries for {len(history)} history rows")
     slip = np.isin(history.status, list(SLIP)) & (move_ids > 0)
+    slip[np.asarray(dropped, dtype=int)] = False
     keys = np.unique(np.stack([move_ids[slip], history.status[slip]], axis=1), axis=0)
     groups = [
         np.flatnonzero(slip & (move_ids == move) & (history.status == status))
@@ -41,19 +43,30 @@ def slide_groups(history: History, move_ids) -> list[np.ndarray]:
 
 
 def consistent_with_slides(
-    vertices: np.ndarray, closed: bool, history: History, move_ids, load, friction: float
+    vertices: np.ndarray,
+    closed: bool,
+    history: History,
+    move_ids,
+    load,
+    friction: float,
+    dropped=(),
 ) -> np.ndarray:
     """(N,) whether each sample (N, n, 2) lets every recorded slide happen.
 
     For a slide with rows r_0 (first contact) .. r_k: the edge each row's segment lands on
     (first crossing, eqs. 4-10) must lie at or beyond r_0's edge in the slide direction, and
     every edge from r_0's edge to the farthest of them must face the load and slip that way
-    (eq. 12's cones), so no edge sticks and no vertex traps on the way. A row that lands on no
-    edge fails the sample.
+    (eq. 12's cones), so no edge sticks and no vertex traps on the way. Decision: a row that
+    lands on no edge of a sample is left out for that sample, and a slide whose first contact
+    lands nowhere constrains it not at all: the sampler already checked each row (eq. 13), so
+    such a row is one the sampler's model and the exact crossing test disagree on, not
+    evidence against the sample. The truth passes for loading moves along the load (the
+    planner's terminal segments): ``explore.slide_evidence`` and the executor's
+    ``crossed_pieces`` report only edges the slide crossed on the way down.
     """
     vertices = np.asarray(vertices, float)
     ok = np.ones(len(vertices), dtype=bool)
-    groups = slide_groups(history, move_ids)
+    groups = slide_groups(history, move_ids, dropped)
     if not groups or not len(vertices):
         return ok
     n = vertices.shape[1]
@@ -67,31 +80,20 @@ def consistent_with_slides(
     landed = np.empty((len(vertices), len(rows)), dtype=bool)
     for j, row in enumerate(rows):  # one exact crossing test per slide row, over all samples
         landed[:, j], hosts[:, j], _, _ = simulate.first_hits(c, d, history.a[row], history.b[row])
-    ok &= landed.all(axis=1)
     start = 0
     for group in groups:
-        h = hosts[:, start : start + len(group)]
+        h, hit = hosts[:, start : start + len(group)], landed[:, start : start + len(group)]
         start += len(group)
         step = SLIP[Status(int(history.status[group[0]]))]
         offset = step * (h - h[:, :1])
         if closed:
             offset %= count
-        ok &= np.all(offset >= 0, axis=1)
+        offset = np.where(hit, offset, 0)
         along = step * (np.arange(count)[None, :] - h[:, :1])
         if closed:
             along %= count
         span = (along >= 0) & (along <= offset.max(axis=1, keepdims=True))
         carries = faces & (slip_right if step > 0 else slip_left)
-        ok &= ~np.any(span & ~carries, axis=1)
+        fails = np.any(offset < 0, axis=1) | np.any(span & ~carries, axis=1)
+        ok &= ~(hit[:, 0] & fails)
     return ok
-
-
-def keep_consistent(
-    vertices: np.ndarray, closed: bool, history: History, move_ids, load, friction: float
-) -> tuple[np.ndarray, int]:
-    """The samples (N, n, 2) on which every slide could have happened, and how many were
-    rejected. Decision: when fewer than two pass (a moment fit needs two), all are kept and the
-    count still says how many failed."""
-    keep = consistent_with_slides(vertices, closed, history, move_ids, load, friction)
-    rejected = int(len(keep) - keep.sum())
-    return (vertices[keep] if keep.sum() >= 2 else vertices), rejected

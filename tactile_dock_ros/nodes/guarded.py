@@ -285,7 +285,9 @@ class GuardedRun:
             self._record_contact(self._anchor, d, self._slip)
             if free:  # the trace up to the rest point ended at the vertex it slid off
                 trace = np.array([self._anchor, *self._trace, rest])
-                pieces = crossed_pieces(trace, self.settings.contact_resolution)
+                left = np.array([-d[1], d[0]])  # the side a SLIP_LEFT slide moves to
+                side = left if self._slip == Status.SLIP_LEFT else -left
+                pieces = crossed_pieces(trace, self.settings.contact_resolution, side)
                 for middle in pieces:
                     self._record_contact(middle, d, self._slip)
             why = "lost contact" if free else "exceeded max_slide"
@@ -332,15 +334,19 @@ class GuardedRun:
         self._phase = _Phase.DONE
 
 
-def crossed_pieces(trace: np.ndarray, resolution: float) -> np.ndarray:
+def crossed_pieces(trace: np.ndarray, resolution: float, side: np.ndarray) -> np.ndarray:
     """Middles (k, 2) of the straight pieces of a slide trace (n, 2) after its first piece.
 
     The trace's corners (Douglas-Peucker, tolerance ``resolution`` / 4) are where the surface
     turned; the first piece covers only part of the first contacted edge (its evidence is the
     first contact), every later piece is an edge crossed completely, ending at a corner or at
-    the vertex the tool slid off. Pieces shorter than ``resolution`` are dropped. This is the
-    evidence ``core.explore.slide_evidence`` gives the simulated robot, from the robot's own
-    trace. The loop pops at most one split per trace point.
+    the vertex the tool slid off. Pieces shorter than ``resolution`` are dropped, and so are
+    pieces that do not run toward ``side`` (the unit normal of the push direction on the slip's
+    side): sliding under the load, the tool moves that way along every edge that faces the
+    load and slips like the first contact (eq. 12); a piece that does not is a wall or an
+    undercut the arm's lateral stiffness pulled the tool along after it passed the lip, and
+    would be false evidence. This is the evidence ``core.explore.slide_evidence`` gives the
+    simulated robot, from the robot's own trace. The loop pops at most one split per trace point.
     """
     keep, stack = {0, len(trace) - 1}, [(0, len(trace) - 1)]
     while stack:
@@ -359,8 +365,8 @@ def crossed_pieces(trace: np.ndarray, resolution: float) -> np.ndarray:
             stack += [(i, i + 1 + k), (i + 1 + k, j)]
     corners = trace[sorted(keep)]
     a, b = corners[1:-1], corners[2:]
-    long_enough = np.linalg.norm(b - a, axis=1) >= resolution
-    return (0.5 * (a + b))[long_enough]
+    usable = (np.linalg.norm(b - a, axis=1) >= resolution) & ((b - a) @ side > 0)
+    return (0.5 * (a + b))[usable]
 
 
 class ForceFilter:

@@ -210,11 +210,17 @@ class PlannerNode(Node):
             return
         with Stopwatch() as watch:
             try:
-                result = self.plan(vertices)
+                result = self.plan(vertices, msg.dropped_segments)
             except (ValueError, RuntimeError) as err:
                 self.get_logger().error(f"planning failed: {err}")
                 self.finish(ABORTED, f"planner failed: {err}")
                 return
+        if result.rejected:
+            message = f"{result.rejected} of {len(vertices)} samples contradict a recorded slide"
+            if result.rejected >= len(vertices) - 1:  # core.planner.plan kept them all
+                self.get_logger().warning(f"{message}; fewer than two left, planned on all")
+            else:
+                self.get_logger().info(message)
         dock = result.decision == "dock"
         command = convert.PlanCommand(
             plan_id=len(self.cycles) + 1,
@@ -258,7 +264,9 @@ class PlannerNode(Node):
         self.targets.append(np.asarray(result.target_point, float))  # eq. (24) novelty
         self.publish_status()
 
-    def plan(self, vertices: np.ndarray):
+    def plan(self, vertices: np.ndarray, dropped=()):
+        """``core.planner.plan`` on the node's state; ``dropped``: the history rows inference
+        ignored (ShapeSamples.dropped_segments)."""
         return plan_docking(
             vertices,
             self.prior,
@@ -271,6 +279,7 @@ class PlannerNode(Node):
             give_up_threshold=self.p.give_up_threshold,
             compliant=self.p.compliant,
             move_ids=self.history_plan_ids,
+            dropped=dropped,
         )
 
     # ------------------------------------------------------------------ episode status

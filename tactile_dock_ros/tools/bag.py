@@ -105,6 +105,13 @@ def read(path: Path, topics: Iterable[str] = EPISODE_TOPICS) -> Iterator[tuple[s
             if not connections:
                 return
             for connection, stamp_ns, raw in reader.messages(connections=connections):
-                yield connection.topic, stamp_ns, deserialize_message(raw, classes[connection.id])
+                try:
+                    msg = deserialize_message(raw, classes[connection.id])
+                except Exception as err:  # rclpy raises its RMWError on a definition mismatch
+                    raise BagError(
+                        f"{path}: cannot decode a {connection.msgtype} on {connection.topic}; "
+                        f"recorded with another version of the message? ({err})"
+                    ) from err
+                yield connection.topic, stamp_ns, msg
     except ReaderError as err:
         raise BagError(f"cannot read bag {path}: {err}") from err

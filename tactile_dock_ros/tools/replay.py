@@ -49,6 +49,7 @@ class Cycle:
     history: History
     plan_ids: np.ndarray  # (k,) the plan that observed each history row (its slides)
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
+    dropped: np.ndarray  # history rows inference ignored for them (dropped_segments)
     previous_targets: np.ndarray  # (k, 2) aim points of the episode's earlier DOCK plans
     recorded: object  # nodes.convert.PlanCommand
     outcome: str  # the executor's report for the plan ("-": none recorded)
@@ -71,39 +72,63 @@ def _stamp_ns(msg) -> int:
     return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
 
 
-def _latest(items: list, stamp_ns: int):
-    """Of ``items`` [(header stamp ns, value)], the one stamped last at or before ``stamp_ns``,
-    or None. Decision: header stamps, not bag order: a recorder orders the messages of one
-    topic, not across topics, so samples may be recorded after the plan made from them."""
-    before = [(t, i) for i, (t, _) in enumerate(items) if t <= stamp_ns]
-    return items[max(before)[1]][1] if before else None
+def _pick(items: list, span: tuple[int, int], stamp_ns: int):
+    """Of ``items`` [(bag position, header stamp ns, value)] recorded within the episode's
+    ``span`` of bag positions, the one stamped last at or before ``stamp_ns``, else (clocks
+    that disagree) the first recorded in the span; (value, stamped after) or (None, False).
+
+    Decision: header stamps within the episode, not bag order: a recorder orders the messages
+    of one topic, not across topics, so samples may be recorded after the plan made from them;
+    the span keeps another episode's history of the same length out."""
+    inside = [(t, value) for position, t, value in items if span[0] <= position < span[1]]
+    before = [(t, i) for i, (t, _) in enumerate(inside) if t <= stamp_ns]
+    if before:
+        return inside[max(before)[1]][1], False
+    return (inside[0][1], True) if inside else (None, False)
+
+
+def _episode_spans(plans: list) -> dict[int, tuple[int, int]]:
+    """Bag positions of each episode's messages: from after the previous episode's last plan
+    to its own last plan's report or the next episode's first plan (at most the bag's end)."""
+    firsts, lasts = {}, {}
+    for position, _, command in plans:
+        firsts.setdefault(command.episode, position)
+        lasts[command.episode] = position
+    order = sorted(firsts, key=firsts.get)
+    spans = {}
+    for k, episode in enumerate(order):
+        start = lasts[order[k - 1]] + 1 if k else 0
+        end = firsts[order[k + 1]] if k + 1 < len(order) else 2**62
+        spans[episode] = (start, end)
+    return spans
 
 
 def load_cycles(path: Path, log=print) -> list[Cycle]:
     """The cycles of every episode in the bag at ``path``, in order.
 
     A plan's inputs are the prior and the ``/contact_history`` and ``/shape_samples`` of the
-    length the plan records (``DockingPlan.history_length``), each the one stamped last at or
-    before the plan. Raises ``bag.BagError`` when the bag cannot be read or holds no plan with
-    its inputs.
+    length the plan records (``DockingPlan.history_length``), recorded within its episode and
+    each stamped last at or before the plan (``_pick``). Raises ``bag.BagError`` when the bag
+    cannot be read or holds no plan with its inputs.
     """
     from ..nodes import convert
 
     priors: list = []
-    histories: dict[int, list] = {}  # length -> [(stamp, (History, plan ids))]
-    samples: dict[int, list] = {}  # history length -> [(stamp, (N, n, 2) vertices)]
+    histories: dict[int, list] = {}  # length -> [(position, stamp, (History, plan ids))]
+    samples: dict[int, list] = {}  # history length -> [(position, stamp, (vertices, dropped))]
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
     plans, seen = [], set()
-    for topic, _, msg in bag.read(path):
+    for position, (topic, _, msg) in enumerate(bag.read(path)):
+        entry = (position, _stamp_ns(msg)) if hasattr(msg, "header") else (position, 0)
         if topic == "/terrain_prior":
-            priors.append((_stamp_ns(msg), convert.shape_from_msg(msg)))
+            priors.append((*entry, convert.shape_from_msg(msg)))
         elif topic == "/contact_history":
             history = convert.history_from_segments(msg.segments)
             ids = convert.plan_ids_from_segments(msg.segments)
-            histories.setdefault(len(history), []).append((_stamp_ns(msg), (history, ids)))
+            histories.setdefault(len(history), []).append((*entry, (history, ids)))
         elif topic == "/shape_samples" and msg.num_samples > 0:
-            vertices = convert.samples_from_msg(msg)
-            samples.setdefault(int(msg.history_length), []).append((_stamp_ns(msg), vertices))
+            value = (convert.samples_from_msg(msg), np.array(msg.dropped_segments, int))
+            samples.setdefault(int(msg.history_length), []).append((*entry, value))
         elif topic == "/execution_report":
             report = convert.report_from_msg(msg)
             reports[(report.episode, report.plan_id)] = report.outcome_name
@@ -111,38 +136,43 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
             key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
             if key not in seen:  # the planner resends a plan until its report arrives
                 seen.add(key)
-                plans.append((_stamp_ns(msg), convert.plan_from_msg(msg)))
+                plans.append((*entry, convert.plan_from_msg(msg)))
+    spans = _episode_spans(plans)
     cycles, episode, targets = [], None, []
-    for stamp, command in plans:
+    for _, stamp, command in plans:
         if command.episode != episode:
             episode, targets = command.episode, []
         previous = np.array(targets).reshape(-1, 2)
         if command.dock:
             targets = [*targets, command.target_point]
-        prior = _latest(priors, stamp)
-        recorded = _latest(histories.get(command.history_length, []), stamp)
-        vertices = _latest(samples.get(command.history_length, []), stamp)
-        if prior is None or recorded is None or vertices is None:
-            log(
-                f"episode {episode} plan {command.plan_id}: skipped, its prior, history or "
-                f"samples (history length {command.history_length}) are not in the bag"
-            )
+        name = f"episode {episode} plan {command.plan_id}"
+        length = command.history_length
+        picked = [
+            _pick(items, spans[episode], stamp)
+            for items in (priors, histories.get(length, []), samples.get(length, []))
+        ]
+        (prior, _), (recorded, _), (drawn, _) = picked
+        if prior is None or recorded is None or drawn is None:
+            log(f"{name}: skipped, its prior, history or samples (length {length}) are missing")
             continue
+        if any(late for _, late in picked):
+            log(f"{name}: an input is stamped after the plan (clocks differ?); used the first")
         if len(command.waypoints) == 0:
-            log(f"episode {episode} plan {command.plan_id}: skipped, no tool position")
+            log(f"{name}: skipped, no tool position")
             continue
         outcome = reports.get((episode, command.plan_id), "-")
-        cycles.append(Cycle(episode, prior, *recorded, vertices, previous, command, outcome))
+        cycles.append(Cycle(episode, prior, *recorded, *drawn, previous, command, outcome))
     if not cycles:
         raise bag.BagError(f"{path}: no plan with its inputs recorded (topics: /plan, ...)")
     return cycles
 
 
-def replan(cycle: Cycle, settings: Settings, samples: np.ndarray | None = None) -> planner.Plan:
-    """``core.planner.plan`` on the cycle's inputs (or on ``samples`` instead of the recorded)."""
+def replan(cycle: Cycle, settings: Settings, fresh=None) -> planner.Plan:
+    """``core.planner.plan`` on the cycle's inputs, or on ``fresh`` posterior samples
+    (``core.sampling.PosteriorSamples``) instead of the recorded ones."""
     compliant = cycle.recorded.compliant if settings.compliant is None else settings.compliant
     return planner.plan(
-        cycle.samples if samples is None else samples,
+        cycle.samples if fresh is None else fresh.vertices,
         cycle.prior,
         cycle.history,
         cycle.start,
@@ -153,6 +183,7 @@ def replan(cycle: Cycle, settings: Settings, samples: np.ndarray | None = None) 
         give_up_threshold=settings.give_up_threshold,
         compliant=compliant,
         move_ids=cycle.plan_ids,
+        dropped=cycle.dropped if fresh is None else fresh.dropped,
     )
 
 
@@ -182,6 +213,7 @@ def compare(cycle: Cycle, plan: planner.Plan) -> dict:
             "target_edge": plan.target_edge,
             "p_dock": float(plan.p_dock),
             "reason": plan.reason,
+            "rejected_samples": plan.rejected,
         },
         "same": bool(same),
     }
@@ -294,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.resample:
             fresh = sample_posterior(
                 cycle.prior, cycle.history, args.resample, rng, method=args.method
-            ).vertices
+            )
         plans.append(replan(cycle, settings, fresh))
         rows.append(compare(cycle, plans[-1]))
         print(_format(rows[-1]))
