@@ -24,8 +24,8 @@ Decisions where the paper leaves the robot side open:
   ``core.simulate``) or the slide exceeds ``max_slide``.
   The evidence is that of ``core.explore``'s simulated robot: the status of the first contact
   (the slip), even when the slide then sticks, and after a slide that ended in separation one
-  more slip observation at the middle of every edge the trace crossed completely
-  (``crossed_pieces``). A finite lateral stiffness pulls back as the tool
+  more slip observation at the middle of every edge the trace crossed completely toward the
+  slip's side (``crossed_pieces``). A finite lateral stiffness pulls back as the tool
   slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may stop on a slope that the
   paper's ideal compliance would slide down; the test reports the hold the arm actually has.
 * Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
