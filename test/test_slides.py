@@ -92,6 +92,12 @@ def test_rows_without_a_slide_leave_every_sample():
     assert slides.slide_groups(history, [1, 2, 3]) == []
 
 
+def test_dropped_rows_must_be_history_rows():
+    history = slide_probes(slope_shape(), [3, 1])
+    with pytest.raises(ValueError, match=r"dropped rows \[2\] outside the 2-row history"):
+        slides.consistent_with_slides(slope_shape()[None], False, history, [1, 1], LOAD, MU, [2])
+
+
 def test_move_ids_must_match_the_history():
     with pytest.raises(ValueError, match="move_ids has 1 entries for 2 history rows"):
         slides.consistent_with_slides(

@@ -32,8 +32,11 @@ def slide_groups(history: History, move_ids, dropped=()) -> list[np.ndarray]:
     move_ids = np.asarray(move_ids).reshape(-1)
     if len(move_ids) != len(history):
         raise ValueError(f"move_ids has {len(move_ids)} entries for {len(history)} history rows")
+    dropped = np.asarray(dropped, dtype=int).reshape(-1)
+    if np.any((dropped < 0) | (dropped >= len(history))):
+        raise ValueError(f"dropped rows {dropped.tolist()} outside the {len(history)}-row history")
     slip = np.isin(history.status, list(SLIP)) & (move_ids > 0)
-    slip[np.asarray(dropped, dtype=int)] = False
+    slip[dropped] = False
     keys = np.unique(np.stack([move_ids[slip], history.status[slip]], axis=1), axis=0)
     groups = [
         np.flatnonzero(slip & (move_ids == move) & (history.status == status))
