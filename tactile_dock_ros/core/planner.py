@@ -309,10 +309,10 @@ def plan(
         compliant: motion model of the probabilistic simulation.
         max_path_attempts: at most this many candidates are path-planned before giving up.
         move_ids: (k,) the move (plan id, from 1; 0 unknown) that observed each history row;
-            with it, samples on
-            which a recorded compliant slide could not have happened are dropped first
-            (``slides.consistent_with_slides``; ``Plan.rejected`` counts them). Decision: if
-            fewer than two pass (the moment fit needs two) all are kept; the count tells.
+            with it, samples on which a recorded compliant slide could not have happened are
+            dropped first (``slides.consistent_with_slides``; ``Plan.rejected`` counts them).
+            Decision: if fewer than two pass (the moment fit needs two) all are kept; the
+            count tells.
         dropped: history rows the sampler ignored as inconsistent (``PosteriorSamples.dropped``,
             ``ShapeSamples.dropped_segments``); they take no part in a slide.
 

@@ -79,10 +79,14 @@ def consistent_with_slides(
     flags = simulate.friction_functionals(load, friction) @ np.moveaxis(d - c, -1, -2) > 0.0
     slip_left, slip_right, faces = flags[:, 0], flags[:, 1], flags[:, 2]  # (N, E) each
     rows = np.concatenate(groups)
-    hosts = np.empty((len(vertices), len(rows)), dtype=int)
-    landed = np.empty((len(vertices), len(rows)), dtype=bool)
-    for j, row in enumerate(rows):  # one exact crossing test per slide row, over all samples
-        landed[:, j], hosts[:, j], _, _ = simulate.first_hits(c, d, history.a[row], history.b[row])
+    shape = (len(rows), *c.shape)  # every slide row against every sample in one crossing test
+    hit, host, _, _ = simulate.first_hits(
+        np.broadcast_to(c, shape).reshape(-1, *c.shape[1:]),
+        np.broadcast_to(d, shape).reshape(-1, *d.shape[1:]),
+        np.repeat(history.a[rows], len(vertices), axis=0),
+        np.repeat(history.b[rows], len(vertices), axis=0),
+    )
+    landed, hosts = hit.reshape(len(rows), -1).T, host.reshape(len(rows), -1).T
     start = 0
     for group in groups:
         h, hit = hosts[:, start : start + len(group)], landed[:, start : start + len(group)]

@@ -89,7 +89,7 @@ def _pick(items: list, span: tuple[int, int], stamp_ns: int):
 
 def _episode_spans(plans: list) -> dict[int, tuple[int, int]]:
     """Bag positions of each episode's messages: from after the previous episode's last plan
-    to its own last plan's report or the next episode's first plan (at most the bag's end)."""
+    to the next episode's first plan (the last episode: to the bag's end)."""
     firsts, lasts = {}, {}
     for position, _, command in plans:
         firsts.setdefault(command.episode, position)
