@@ -17,8 +17,10 @@ SHARE = {"tactile_dock_ros": REPO_ROOT}
 
 
 def launch_nodes(profile: str, **arguments: str) -> dict:
-    """Node name -> NodeLaunch declared by the launch file for ``profile``."""
-    nodes = launch_xml.parse(LAUNCH_FILE, SHARE, {"profile": profile, **arguments})
+    """Node name -> NodeLaunch declared by the launch file for ``profile`` (no state journals
+    unless ``state_directory`` is given: tests never resume each other's episodes)."""
+    arguments = {"profile": profile, "state_directory": "", **arguments}
+    nodes = launch_xml.parse(LAUNCH_FILE, SHARE, arguments)
     return {n.name: n for n in nodes}
 
 
@@ -53,13 +55,14 @@ def node_from_launch(
 
 
 @contextlib.contextmanager
-def node_with_driver(spec, params_dir, extra_args: list[str] = ()):
-    """The node ``spec`` plus a 'driver' node in the same context, and an executor of both."""
+def node_with_driver(spec, params_dir, extra_args: list[str] = (), executor_class=None):
+    """The node ``spec`` plus a 'driver' node in the same context, and an executor of both
+    (``executor_class(context=...)``, single-threaded by default)."""
     from rclpy.executors import SingleThreadedExecutor
 
     with node_from_launch(spec, params_dir, extra_args) as (node, context):
         driver = Node("test_driver", context=context)
-        executor = SingleThreadedExecutor(context=context)
+        executor = (executor_class or SingleThreadedExecutor)(context=context)
         executor.add_node(node)
         executor.add_node(driver)
         try:

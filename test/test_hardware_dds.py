@@ -65,8 +65,12 @@ def test_executor_docks_on_the_mock_floor_and_respects_its_limits(floor_bringup)
         assert matched, [p.poll() for p in processes.values()]
         plan_pub.publish(_plan(1, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]], speed=0.9))  # too fast
         assert spin_until(executor, lambda: len(reports) == 1, timeout_s=20.0)
-        plan_pub.publish(_plan(2, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]]))
+        plan = _plan(2, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]])
+        # The planner resends the plan being run; the executor stops a plan it stops hearing.
+        resend = node.create_timer(1.0, lambda: plan_pub.publish(plan))
+        plan_pub.publish(plan)
         assert spin_until(executor, lambda: len(reports) == 2, timeout_s=30.0)
+        node.destroy_timer(resend)
     refused, docked = (convert.report_from_msg(r) for r in reports)
     assert refused.outcome == ExecutionReport.ABORTED and "speed" in refused.detail
     assert len(refused.history) == 0

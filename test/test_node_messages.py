@@ -87,14 +87,16 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     [
         ("episode_ended", "episode 0 is ABORTED"),
         ("out_of_plane_force", "(3-D) above the limit"),  # 50 N along the plane normal
+        ("producer_lost", convert.PRODUCER_LOST),  # the planner stops resending the plan
     ],
 )
 def test_executor_stops_a_running_plan(stop, expected, tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
     spec = launch_nodes("mock")["executor"]
-    reports, commands, normal_force = [], [], [0.0]
-    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+    reports, commands, normal_force, resend = [], [], [0.0], [True]
+    timeout = ["-p", "executor:producer_timeout:=1.5"]
+    with node_with_driver(spec, tmp_path, timeout) as (node, driver, executor):
         plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
         poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
         wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
@@ -104,14 +106,18 @@ def test_executor_stops_a_running_plan(stop, expected, tmp_path):
         publishers = (plans, poses, wrenches, statuses)
         assert spin_until(executor, lambda: all(p.get_subscription_count() for p in publishers), 10)
 
-        def feed():  # live sensors, so that only the tested cause stops the plan
+        plan = _plan_msg(1, [[0.0, 0.3], [0.0, 0.1]])  # episode 0
+
+        def feed():  # live sensors and planner, so that only the tested cause stops the plan
             poses.publish(_pose(0.0, 0.6, 0.3))
             wrench = WrenchStamped()
             wrench.wrench.force.y = normal_force[0]  # base y = the plane's normal
             wrenches.publish(wrench)
+            if resend[0]:
+                plans.publish(plan)
             return node.run is not None and node.filter.ready and bool(commands)
 
-        plans.publish(_plan_msg(1, [[0.0, 0.3], [0.0, 0.1]]))  # episode 0
+        plans.publish(plan)
         assert spin_until(executor, lambda: feed() and not _zero(commands[-1]), 10.0)
         status = DiagnosticStatus(message="RUNNING", values=[KeyValue(key="episode", value="0")])
         statuses.publish(status)
@@ -119,6 +125,8 @@ def test_executor_stops_a_running_plan(stop, expected, tmp_path):
         if stop == "episode_ended":
             status.message = "ABORTED: no posterior samples within 60 s"
             statuses.publish(status)
+        elif stop == "producer_lost":
+            resend[0] = False
         else:
             normal_force[0] = 50.0
         assert spin_until(executor, lambda: feed() is not None and reports, 10.0)
@@ -138,7 +146,7 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
     spec = launch_nodes("mock")["inference"]
     histories = []
     with node_with_driver(spec, tmp_path) as (node, driver, executor):
-        reports = driver.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
+        reports = driver.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
         assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
         good = convert.Report(

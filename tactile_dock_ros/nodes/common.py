@@ -7,7 +7,7 @@ import time
 from collections.abc import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Header
 
@@ -67,13 +67,18 @@ class Stopwatch:
         self.seconds = time.perf_counter() - self._t0
 
 
-def run(node_class: type[Node], args: list[str] | None = None) -> int:
-    """Console entry point: init, spin until shutdown, clean up; parameter errors exit 2."""
+def run(
+    node_class: type[Node],
+    args: list[str] | None = None,
+    executor: Callable[[], Executor] = SingleThreadedExecutor,
+) -> int:
+    """Console entry point: init, spin with ``executor()`` until shutdown, clean up; parameter
+    errors exit 2."""
     rclpy.init(args=args)
     node = None
     try:
         node = node_class()
-        rclpy.spin(node)
+        rclpy.spin(node, executor=executor())
     except ValueError as err:  # invalid parameters: say which and stop
         print(f"{node_class.__name__}: {err}", file=sys.stderr)
         return 2

@@ -380,6 +380,16 @@ class Report:
     def outcome_name(self) -> str:
         return OUTCOME_NAMES[self.outcome]
 
+    @property
+    def producer_lost(self) -> bool:
+        """An ABORTED attempt the executor stopped because the planner fell silent: the
+        episode goes on when the planner is back (docs/nodes.md, "Restart without loss")."""
+        return self.outcome == ExecutionReport.ABORTED and self.detail.startswith(PRODUCER_LOST)
+
+
+# ExecutionReport.detail of an attempt stopped because no copy of its plan arrived in time.
+PRODUCER_LOST = "producer lost:"
+
 
 def report_to_msg(report: Report, header: Header) -> ExecutionReport:
     return ExecutionReport(

@@ -2,7 +2,10 @@
 
 Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wrench``
 (WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
-planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped);
+planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped); the
+planner resends the plan being executed every second: when no copy arrived for
+``producer_timeout`` the planner is gone (crashed, killed) and the arm is stopped (ABORTED,
+detail ``convert.PRODUCER_LOST``; a restarted planner replans);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
 ``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends. Messages in
 an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
@@ -67,6 +70,14 @@ PARAMS = [
     ),
     Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
+    Param(
+        "producer_timeout",
+        3.0,
+        "stop the arm when no copy of the running plan (resent every 1 s) came for this long",
+        "s",
+        1.5,
+        60.0,
+    ),
 ]
 
 
@@ -103,8 +114,9 @@ class ExecutorNode(Node):
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
         self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
+        self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the plan
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
-        self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
+        self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         self.create_subscription(
             DockingPlan, "plan", guarded(self, "plan", self.on_plan), qos.EVENTS
         )
@@ -142,8 +154,11 @@ class ExecutorNode(Node):
     def on_plan(self, msg: DockingPlan) -> None:
         key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
         if key in self.seen_plans:  # the planner resends a plan until its report arrives
+            if key == self.plan_heard[0]:
+                self.plan_heard = (key, now_seconds(self))
             return
         self.seen_plans.add(key)
+        self.plan_heard = (key, now_seconds(self))
         plan = convert.plan_from_msg(msg)
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
@@ -191,6 +206,14 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
 
     def on_tick(self) -> None:
+        silent = now_seconds(self) - self.plan_heard[1]
+        if silent > self.p.producer_timeout and (self.run is not None or self.pending is not None):
+            why = f"{convert.PRODUCER_LOST} no copy of the plan for {silent:.1f} s"
+            if self.run is not None and not self.run.done:
+                self.run.abort(why, self.tool)  # stopped and reported below
+            elif self.pending is not None:
+                plan, self.pending = self.pending[0], None
+                self.report(plan, Outcome.ABORTED, why)
         if self.pending is not None:
             self.start_pending()
         run = self.run

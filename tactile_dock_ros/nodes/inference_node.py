@@ -1,16 +1,33 @@
 """inference: the contact history and posterior shape samples (paper Sec. IV).
 
 Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of
-the current episode count) and ``episode`` (std_msgs/UInt32, latched: the planner's episode id;
-a new id empties the history). Keeps the
-history, publishes it latched on ``contact_history`` and, after every change while an episode
-runs, samples the posterior with ``core.sampling.sample_posterior`` and publishes
-``shape_samples`` (latched) and RViz markers on ``~/markers``.
+the current episode count; latched, so reports sent while this node was down arrive when it
+starts) and ``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the
+history). Keeps the history, publishes it latched on ``contact_history`` and, after every change
+while an episode runs, samples the posterior with ``core.sampling.sample_posterior`` and
+publishes ``shape_samples`` (latched) and RViz markers on ``~/markers``.
+
+Restart without loss: with ``state_directory`` set, every report applied is journaled
+(``nodes.journal``, ``<state_directory>/inference.jsonl``) before the history is published, and a
+restarted node given the same episode id restores the history from it (docs/nodes.md).
+
+Threads (``main`` spins a MultiThreadedExecutor): the subscriptions (one mutually exclusive
+group) only update the state under a lock and publish the history; sampling runs in a guard
+condition's callback of its own group, so the node keeps taking reports, answering parameter
+services and publishing the history while it samples. A result sampled on a history that
+changed meanwhile is dropped and the newest history sampled instead.
 """
 
 from __future__ import annotations
 
+import threading
+from collections import deque
+from functools import partial
+from pathlib import Path
+
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
@@ -18,7 +35,7 @@ from visualization_msgs.msg import MarkerArray
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
-from tactile_dock_ros.nodes import convert, markers, qos
+from tactile_dock_ros.nodes import convert, journal, markers, qos
 from tactile_dock_ros.nodes.common import guarded, header, run
 from tactile_dock_ros.nodes.params import Param, declare
 
@@ -27,7 +44,13 @@ PARAMS = [
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param("marker_samples", 20, "samples drawn as RViz line strips", "", 0, 1000),
+    Param(
+        "state_directory",
+        "",
+        "directory of the crash-safe history journal; empty: no journal (a restart loses it)",
+    ),
 ]
+STASHED_REPORTS = 64  # reports of an episode id not (yet) current, kept until it arrives
 
 
 class InferenceNode(Node):
@@ -42,103 +65,196 @@ class InferenceNode(Node):
         self.plan_ids = np.zeros(0, int)
         self.handled_plans: set[int] = set()
         self.episode = 0
+        self.stash: deque = deque(maxlen=STASHED_REPORTS)
+        self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
+        self.generation = 0  # counts state changes; the sampler publishes only current results
+        self.journal = None
+        if self.p.state_directory:
+            try:
+                self.journal = journal.Journal(Path(self.p.state_directory) / "inference.jsonl")
+            except journal.JournalError as err:
+                raise ValueError(f"parameter state_directory: {err}") from err
         self.history_pub = self.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
         self.samples_pub = self.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.sampler = self.create_guard_condition(self.sample, MutuallyExclusiveCallbackGroup())
         self.create_subscription(
-            ShapeDistribution, "terrain_prior", guarded(self, "prior", self.on_prior), qos.LATCHED
+            ShapeDistribution,
+            "terrain_prior",
+            guarded(self, "prior", self.on_prior),
+            qos.LATCHED,
+            callback_group=inputs,
         )
         self.create_subscription(
-            ExecutionReport, "execution_report", guarded(self, "report", self.on_report), qos.EVENTS
+            ExecutionReport,
+            "execution_report",
+            guarded(self, "report", self.on_report),
+            qos.REPORTS,
+            callback_group=inputs,
         )
-        self.create_subscription(UInt32, "episode", self.on_episode, qos.LATCHED)
+        self.create_subscription(
+            UInt32, "episode", self.on_episode, qos.LATCHED, callback_group=inputs
+        )
 
     def on_prior(self, msg: ShapeDistribution) -> None:
-        self.prior = convert.shape_from_msg(msg)
-        self.last_z = None
-        self.frame_id = msg.header.frame_id or self.frame_id
-        self.get_logger().info(
-            f"prior: {self.prior.n_vertices} vertices, {self.prior.n_basis} basis columns"
-        )
-        self.update()
+        prior = convert.shape_from_msg(msg)
+        with self.lock:
+            self.prior, self.last_z = prior, None
+            self.frame_id = msg.header.frame_id or self.frame_id
+        self.get_logger().info(f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns")
+        self.changed()
 
     def on_episode(self, msg: UInt32) -> None:
         if msg.data == self.episode:
             return
-        self.episode = msg.data
-        self.history, self.plan_ids = History(), np.zeros(0, int)
-        self.last_z = None
-        self.handled_plans.clear()
-        self.get_logger().info(f"episode {self.episode}: history cleared")
-        self.update()
+        with self.lock:
+            self.episode = msg.data
+            self.history, self.plan_ids = History(), np.zeros(0, int)
+            self.last_z = None
+            self.handled_plans.clear()
+            restored = self.restore()
+        self.get_logger().info(
+            f"episode {self.episode}: history restored from the journal, {restored} reports "
+            f"({len(self.history)} segments)"
+            if restored
+            else f"episode {self.episode}: history cleared"
+        )
+        stashed = [r for r in self.stash if r.episode == self.episode]
+        for report in stashed:  # reports that arrived before the episode id
+            self.stash.remove(report)
+            self.apply(report)
+        self.changed()
+
+    def restore(self) -> int:
+        """Reload the current episode's reports from the journal, or start a journal for it;
+        the number of reports restored."""
+        if self.journal is None:
+            return 0
+        records = self.journal.records
+        if not records or records[0].get("episode") != self.episode:
+            self.journal.reset([{"episode": self.episode}])
+            return 0
+        try:
+            for record in records[1:]:
+                self.add(record["plan_id"], History(record["a"], record["b"], record["status"]))
+        except (KeyError, TypeError, ValueError) as err:
+            self.get_logger().error(f"{self.journal.path}: bad record ({err}); history cleared")
+            self.history, self.plan_ids = History(), np.zeros(0, int)
+            self.handled_plans.clear()
+            self.journal.reset([{"episode": self.episode}])
+            return 0
+        return len(records) - 1
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
         if report.episode != self.episode:
+            self.stash.append(report)  # maybe an episode whose id has not arrived yet
             self.get_logger().warning(
-                f"plan {report.plan_id} of episode {report.episode}: report ignored (the current "
-                f"episode is {self.episode})"
+                f"plan {report.plan_id} of episode {report.episode}: report set aside (the "
+                f"current episode is {self.episode})"
             )
             return
-        if report.plan_id in self.handled_plans:
-            self.get_logger().warning(f"plan {report.plan_id}: duplicate report ignored")
-            return
-        self.handled_plans.add(report.plan_id)
-        new = report.history
-        self.history = self.history.extend(new.a, new.b, new.status)
-        self.plan_ids = np.concatenate([self.plan_ids, np.full(len(new), report.plan_id)])
-        self.update()
+        if self.apply(report):
+            self.changed()
 
-    def update(self) -> None:
-        """Publish the history; sample and publish the posterior when an episode runs."""
-        stamp = header(self, self.frame_id)
-        self.history_pub.publish(convert.history_to_msg(self.history, stamp, self.plan_ids))
-        if self.prior is None or self.episode == 0:
+    def apply(self, report: convert.Report) -> bool:
+        """Add a report of the current episode to the history (journaled first); False for a
+        duplicate (the executor's reports are latched: a restart receives them again)."""
+        if report.plan_id in self.handled_plans:
+            self.get_logger().info(f"plan {report.plan_id}: duplicate report ignored")
+            return False
+        new = report.history
+        if self.journal is not None:
+            record = {"plan_id": report.plan_id, "a": new.a.tolist(), "b": new.b.tolist()}
+            try:
+                self.journal.append({**record, "status": new.status.tolist()})
+            except journal.JournalError as err:  # go on: the history is still in memory
+                self.get_logger().error(f"journal: {err}; a restart would lose this report")
+        with self.lock:
+            self.add(report.plan_id, new)
+        return True
+
+    def add(self, plan_id: int, new: History) -> None:
+        self.handled_plans.add(plan_id)
+        self.history = self.history.extend(new.a, new.b, new.status)
+        self.plan_ids = np.concatenate([self.plan_ids, np.full(len(new), plan_id)])
+
+    def changed(self) -> None:
+        """Publish the history now; wake the sampler (its own thread) when an episode runs."""
+        with self.lock:
+            self.generation += 1
+            history, plan_ids, frame_id = self.history, self.plan_ids, self.frame_id
+        stamp = header(self, frame_id)
+        self.history_pub.publish(convert.history_to_msg(history, stamp, plan_ids))
+        self.sampler.trigger()
+
+    def sample(self) -> None:
+        """Sample and publish the posterior of the current history (the guard condition's
+        callback); a result overtaken by a newer history is dropped (that one is sampled)."""
+        with self.lock:
+            generation, prior, history, init_z = (
+                self.generation,
+                self.prior,
+                self.history,
+                self.last_z,
+            )
+            episode, cycle, frame_id = self.episode, len(self.handled_plans) + 1, self.frame_id
+        if prior is None or episode == 0:
             return
         try:
             posterior = sample_posterior(
-                self.prior,
-                self.history,
+                prior,
+                history,
                 self.p.num_samples,
                 self.rng,
                 method=self.p.method,
-                init_z=self.last_z,  # warm start from the previous cycle's posterior
+                init_z=init_z,  # warm start from the previous cycle's posterior
             )
-            vertices = posterior.vertices
-            self.last_z = posterior.z if len(posterior.z) else None
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
-            vertices = np.zeros((0, self.prior.n_vertices, 2))
-        if len(vertices) < 2:  # the planner needs two (moment fit); tell it there are none
-            self.get_logger().error(f"{len(vertices)} posterior samples: publishing an empty set")
+            posterior = None
+        with self.lock:
+            if generation != self.generation:
+                return  # the state changed while sampling: the newer trigger resamples
+            if posterior is not None:
+                self.last_z = posterior.z if len(posterior.z) else None
+        if posterior is None or len(posterior.vertices) < 2:
+            # the planner needs two (moment fit); tell it there are none
+            count = 0 if posterior is None else len(posterior.vertices)
+            self.get_logger().error(f"{count} posterior samples: publishing an empty set")
             self.samples_pub.publish(
                 convert.samples_to_msg(
-                    vertices[:0], header(self, self.frame_id), self.p.method, 0.0, len(self.history)
+                    np.zeros((0, prior.n_vertices, 2)),
+                    header(self, frame_id),
+                    self.p.method,
+                    0.0,
+                    len(history),
                 )
             )
             return
+        stamp = header(self, frame_id)
         self.samples_pub.publish(
             convert.samples_to_msg(
                 posterior.vertices,
-                header(self, self.frame_id),
+                stamp,
                 posterior.method,
                 posterior.ess,
-                len(self.history),
+                len(history),
                 posterior.dropped,
                 posterior.seconds,
             )
         )
         self.marker_pub.publish(
-            markers.samples_and_history(
-                posterior.vertices[: self.p.marker_samples], self.history, stamp
-            )
+            markers.samples_and_history(posterior.vertices[: self.p.marker_samples], history, stamp)
         )
         self.get_logger().info(
-            f"episode {self.episode} cycle {len(self.handled_plans) + 1}: history "
-            f"{len(self.history)} segments, {len(posterior.vertices)} {posterior.method} samples, "
-            f"ESS {posterior.ess:.1f}, {posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
+            f"episode {episode} cycle {cycle}: history {len(history)} segments, "
+            f"{len(posterior.vertices)} {posterior.method} samples, ESS {posterior.ess:.1f}, "
+            f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
         )
 
 
 def main(args: list[str] | None = None) -> int:
-    return run(InferenceNode, args)
+    # Three threads: the inputs, the sampler and the default group (parameter services).
+    return run(InferenceNode, args, partial(MultiThreadedExecutor, num_threads=3))

@@ -12,14 +12,28 @@ DOCKED (a report says so), GAVE_UP (the planner's decision, or ``max_cycles`` re
 docking) or ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/
 DiagnosticStatus, latched) carries the state, the prior's vertex count (0: none yet) and the
 per-cycle latencies.
+
+Restart without loss: with ``state_directory`` set, the episode's events (start, each plan with
+its serialized message, each report's outcome, the end) go to a journal (``nodes.journal``,
+``<state_directory>/planner.jsonl``, replaced at each start). A restarted planner replays it:
+the same episode id (republished, so inference keeps its history), cycles, aim points (eq. 24)
+and the plan being executed, which it resends again; a RUNNING episode whose last event is older
+than ``resume_timeout`` (wall clock) is not resumed but ends ABORTED. An attempt the executor
+stopped because this node fell silent (``Report.producer_lost``) ends its cycle without ending
+the episode: the next plan is made once inference has the attempt's evidence.
 """
 
 from __future__ import annotations
+
+import base64
+import time
+from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.time import Time
 from std_msgs.msg import UInt32
 from std_srvs.srv import Trigger
@@ -32,7 +46,7 @@ from tactile_dock_ros.msg import (
     ShapeDistribution,
     ShapeSamples,
 )
-from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes import convert, journal, qos
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
     Stopwatch,
@@ -55,6 +69,15 @@ PARAMS = [
     Param("compliant", False, "plan with the compliant motion model"),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
     Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
+    Param("state_directory", "", "directory of the crash-safe episode journal; empty: none"),
+    Param(
+        "resume_timeout",
+        120.0,
+        "a restart resumes a running episode whose last event is at most this old",
+        "s",
+        0.0,
+        86400.0,
+    ),
 ]
 
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
@@ -87,7 +110,7 @@ class PlannerNode(Node):
             (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED),
             (ContactHistory, "contact_history", self.on_history, qos.LATCHED),
             (ShapeSamples, "shape_samples", self.on_samples, qos.LATCHED),
-            (ExecutionReport, "execution_report", self.on_report, qos.EVENTS),
+            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS),
             (PoseStamped, "tool_pose", self.on_pose, qos.SENSOR),
         ]
         for msg_type, topic, callback, profile in subscriptions:
@@ -96,6 +119,13 @@ class PlannerNode(Node):
         self.create_timer(0.5, self.on_timer)
         self.last_plan = None  # (msg, node-clock seconds when last sent)
         self.stage_start = None  # node-clock seconds when the current wait began
+        self.journal = None
+        if self.p.state_directory:
+            try:
+                self.journal = journal.Journal(Path(self.p.state_directory) / "planner.jsonl")
+            except journal.JournalError as err:
+                raise ValueError(f"parameter state_directory: {err}") from err
+            self.resume()
         self.publish_status()
 
     # ------------------------------------------------------------------ inputs
@@ -136,6 +166,8 @@ class PlannerNode(Node):
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
         self.stage_start = now_seconds(self)
+        start = {"event": "start", "episode": self.episode}
+        self.log(start | {"start_ns": self.episode_start.nanoseconds}, reset=True)
         self.episode_pub.publish(UInt32(data=self.episode))
         self.get_logger().info(f"episode {self.episode}: started")
         self.publish_status()
@@ -147,15 +179,22 @@ class PlannerNode(Node):
         current = report.episode == self.episode and report.plan_id == self.awaiting_plan
         if self.state != RUNNING or not current:
             return
+        execution_s = stamp_seconds(msg.header.stamp) - self.cycles[-1]["plan_stamp"]
+        event = {"event": "report", "plan_id": report.plan_id, "outcome": report.outcome_name}
+        event |= {"execution_s": execution_s, "segments": len(report.history)}
+        self.log(event | {"producer_lost": report.producer_lost})
+        self.end_cycle(event, report.producer_lost)
         cycle = self.cycles[-1]
-        cycle["outcome"] = report.outcome_name
-        cycle["execution_s"] = stamp_seconds(msg.header.stamp) - cycle["plan_stamp"]
-        self.awaiting_plan = None
         self.get_logger().info(
             f"episode {self.episode} cycle {len(self.cycles)}: P_dock={cycle['p_dock']:.3f} "
             f"decision=DOCK outcome={report.outcome_name} ({report.detail})"
         )
-        if report.outcome == ExecutionReport.DOCKED:
+        if report.producer_lost and len(self.cycles) < self.p.max_cycles:
+            self.get_logger().warning(f"episode {self.episode}: attempt interrupted; replanning")
+            self.stage_start = now_seconds(self)
+            self.publish_status()
+            self.maybe_plan()
+        elif report.outcome == ExecutionReport.DOCKED:
             self.finish(DOCKED, report.detail)
         elif report.outcome == ExecutionReport.ABORTED:
             self.finish(ABORTED, report.detail)
@@ -187,14 +226,14 @@ class PlannerNode(Node):
             return False
         msg, _ = self.samples
         fresh = Time.from_msg(msg.header.stamp) >= self.episode_start
-        last_planned_on = len(self.cycles[-1]["history"]) if self.cycles else -1
         return (
             fresh
             and self.prior is not None
             and self.tool is not None
             and self.history is not None
             and msg.history_length == len(self.history)
-            and msg.history_length > last_planned_on  # the last report's evidence is in
+            # the last report's evidence is in
+            and msg.history_length >= (self.cycles[-1]["next_history"] if self.cycles else 0)
         )
 
     def maybe_plan(self) -> None:
@@ -240,16 +279,19 @@ class PlannerNode(Node):
             history_length=len(self.history),
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
-        self.cycles.append(
-            {
-                "history": self.history,
-                "p_dock": float(result.p_dock),
-                "inference_s": float(msg.compute_time),
-                "planning_s": watch.seconds,
-                "plan_stamp": stamp_seconds(out.header.stamp),
-                "outcome": "",
-            }
-        )
+        event = {
+            "event": "plan",
+            "history_length": len(self.history),
+            "p_dock": float(result.p_dock),
+            "inference_s": float(msg.compute_time),
+            "planning_s": watch.seconds,
+            "plan_stamp": stamp_seconds(out.header.stamp),
+            "dock": dock,
+            "target": np.asarray(result.target_point, float).tolist() if dock else None,
+            "msg": base64.b64encode(serialize_message(out)).decode(),
+        }
+        self.log(event)  # on disk before the executor can act on it
+        self.add_cycle(event)
         self.plan_pub.publish(out)
         if not dock:
             self.get_logger().info(
@@ -258,11 +300,81 @@ class PlannerNode(Node):
             )
             self.finish(GAVE_UP, result.reason)
             return
-        self.awaiting_plan = command.plan_id
         self.stage_start = now_seconds(self)
-        self.last_plan = (out, now_seconds(self))
-        self.targets.append(np.asarray(result.target_point, float))  # eq. (24) novelty
         self.publish_status()
+
+    # ------------------------------------------------------------------ episode journal
+
+    def add_cycle(self, event: dict) -> None:
+        """Record a published plan (``event``: its journal record)."""
+        keys = ("p_dock", "inference_s", "planning_s", "plan_stamp", "history_length")
+        cycle = {key: event[key] for key in keys} | {"outcome": ""}
+        cycle["next_history"] = event["history_length"] + 1  # the next plan needs its evidence
+        self.cycles.append(cycle)
+        if event["dock"]:
+            out = deserialize_message(base64.b64decode(event["msg"]), DockingPlan)
+            self.awaiting_plan = out.plan_id
+            self.last_plan = (out, now_seconds(self))
+            self.targets.append(np.asarray(event["target"], float))  # eq. (24) novelty
+
+    def end_cycle(self, event: dict, interrupted: bool) -> None:
+        """Record the report of the plan being executed (``event``: its journal record)."""
+        cycle = self.cycles[-1]
+        cycle["outcome"] = "INTERRUPTED" if interrupted else event["outcome"]
+        cycle["execution_s"] = event["execution_s"]
+        if interrupted:  # plan again on the same history plus what the attempt felt
+            cycle["next_history"] = cycle["history_length"] + event["segments"]
+        self.awaiting_plan = None
+
+    def log(self, event: dict, reset: bool = False) -> None:
+        if self.journal is None:
+            return
+        event = event | {"wall_time": time.time()}
+        try:
+            self.journal.reset([event]) if reset else self.journal.append(event)
+        except journal.JournalError as err:  # go on: the episode is still in memory
+            self.get_logger().error(f"journal: {err}; a restart would lose this episode")
+
+    def resume(self) -> None:
+        """Replay the journal of the last episode; resume it when it was running."""
+        records = self.journal.records
+        if not records or records[0].get("event") != "start":
+            return
+        try:
+            for event in records:
+                self.replay(event)
+        except (KeyError, TypeError, ValueError, IndexError) as err:
+            self.get_logger().error(f"{self.journal.path}: bad record ({err}); not resumed")
+            self.state, self.episode, self.cycles, self.targets = IDLE, 0, [], []
+            self.awaiting_plan = None
+            return
+        if self.state != RUNNING:
+            return
+        age = time.time() - records[-1].get("wall_time", 0.0)
+        if age > self.p.resume_timeout:
+            self.awaiting_plan = None
+            self.finish(ABORTED, f"not resumed: its last event is {age:.0f} s old")
+            return
+        self.stage_start = now_seconds(self)
+        self.episode_pub.publish(UInt32(data=self.episode))
+        waiting = f"plan {self.awaiting_plan}" if self.awaiting_plan else "samples"
+        self.get_logger().warning(
+            f"episode {self.episode}: resumed after a restart ({len(self.cycles)} cycles, "
+            f"waiting for {waiting})"
+        )
+
+    def replay(self, event: dict) -> None:
+        kind = event["event"]
+        if kind == "start":
+            self.episode, self.state, self.cycles, self.targets = event["episode"], RUNNING, [], []
+            clock_type = self.get_clock().clock_type
+            self.episode_start = Time(nanoseconds=event["start_ns"], clock_type=clock_type)
+        elif kind == "plan":
+            self.add_cycle(event)
+        elif kind == "report":
+            self.end_cycle(event, event["producer_lost"])
+        elif kind == "finish":
+            self.state = event["state"]
 
     def plan(self, vertices: np.ndarray, dropped=()):
         """``core.planner.plan`` on the node's state; ``dropped``: the history rows inference
@@ -286,6 +398,7 @@ class PlannerNode(Node):
 
     def finish(self, state: str, why: str) -> None:
         self.state = state
+        self.log({"event": "finish", "state": state, "why": why})
         self.get_logger().info(f"episode {self.episode}: {state} after {len(self.cycles)} cycles")
         self.publish_status(why)
 

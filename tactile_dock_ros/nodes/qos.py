@@ -4,7 +4,11 @@
   a best-effort subscription also matches a reliable driver.
 * ``LATCHED``: state that a late joiner must see (prior, contact history, samples, episode
   status): reliable, transient local, keep last 1.
-* ``EVENTS``: plans and execution reports: reliable, volatile, keep last 10 (each is handled once).
+* ``EVENTS``: plans: reliable, volatile, keep last 10 (each is handled once; the planner resends
+  the plan being executed every second).
+* ``REPORTS``: execution reports: reliable, transient local, keep last ``REPORT_DEPTH``: a node
+  restarted mid-episode (inference, planner) receives the reports it missed; receivers drop
+  duplicates by (episode, plan id). Volatile subscribers (``ros2 topic echo``) match too.
 * ``COMMAND``: Cartesian commands to the arm: reliable (matches reliable and best-effort
   drivers), keep last 1 (only the newest command matters).
 """
@@ -22,6 +26,12 @@ LATCHED = QoSProfile(
 )
 EVENTS = QoSProfile(
     depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+)
+REPORT_DEPTH = 32  # more than the reports of one episode sent while a node restarts
+REPORTS = QoSProfile(
+    depth=REPORT_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 COMMAND = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE

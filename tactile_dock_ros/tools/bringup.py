@@ -41,9 +41,13 @@ def nodes(arguments: dict[str, str]) -> list[launch_xml.NodeLaunch]:
 def running(
     arguments: dict[str, str], log_dir: Path, only: Iterable[str] | None = None
 ) -> Iterator[dict[str, subprocess.Popen]]:
-    """Run the launch file's nodes (all, or those named in ``only``) until the block exits."""
+    """Run the launch file's nodes (all, or those named in ``only``) until the block exits.
+
+    The nodes' journals go to ``<log_dir>/state`` unless ``arguments`` name a state_directory,
+    so that runs never resume each other's episodes."""
     log_dir = Path(log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
+    arguments = {"state_directory": str(log_dir / "state"), **arguments}
     wanted = None if only is None else set(only)
     processes: dict[str, subprocess.Popen] = {}
     # The scripts import the package of this source tree, as the work tree's tests do.

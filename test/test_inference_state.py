@@ -1,0 +1,112 @@
+"""The inference node's state across restarts (its journal) and while it samples (threads).
+
+In-process nodes over DDS (random domain, conftest): a restarted node, in a fresh context where
+no report is redelivered, restores the episode's history from its journal alone; and the node
+takes reports and publishes the history while a sampling call is still running.
+"""
+
+import threading
+from functools import partial
+
+import numpy as np
+import pytest
+from node_helpers import launch_nodes, node_with_driver
+from ros_helpers import spin_until
+from rclpy.executors import MultiThreadedExecutor
+from std_msgs.msg import UInt32
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeSamples
+from tactile_dock_ros.nodes import convert, inference_node, qos
+
+pytestmark = pytest.mark.dds
+EPISODE = 41
+
+
+def _report(plan_id: int, rows: int) -> ExecutionReport:
+    rng = np.random.default_rng(plan_id)
+    a = rng.uniform(-0.2, 0.2, size=(rows, 2))
+    history = convert.history_from_segments([]).extend(a, a + [0.0, -0.05], [0] * rows)
+    report = convert.Report(plan_id, ExecutionReport.NO_CONTACT, history, a[-1], "", EPISODE)
+    return convert.report_to_msg(report, convert.Header(frame_id="dock_plane"))
+
+
+def _inputs(driver):
+    """Latched episode id and the executor's report topic, as the suite has them."""
+    episode = driver.create_publisher(UInt32, "episode", qos.LATCHED)
+    reports = driver.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
+    return episode, reports
+
+
+def test_a_restarted_node_restores_the_episode_history_from_its_journal(tmp_path):
+    spec = launch_nodes("mock", state_directory=str(tmp_path / "state"))["inference"]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        episode.publish(UInt32(data=EPISODE))
+        assert spin_until(executor, lambda: node.episode == EPISODE, 10.0)
+        for plan_id, rows in ((1, 2), (2, 3)):
+            reports.publish(_report(plan_id, rows))
+        assert spin_until(executor, lambda: len(node.history) == 5, 10.0)
+        before = node.history, node.plan_ids.copy()
+    # A new process: only the latched episode id arrives again (no report is redelivered).
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        histories = []
+        driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
+        episode, _ = _inputs(driver)
+        episode.publish(UInt32(data=EPISODE))
+        assert spin_until(executor, lambda: histories and len(histories[-1].segments) == 5, 10.0)
+        restored = convert.history_from_segments(histories[-1].segments)
+        np.testing.assert_array_equal(restored.a, before[0].a)  # bit-exact through JSON
+        np.testing.assert_array_equal(restored.b, before[0].b)
+        np.testing.assert_array_equal(restored.status, before[0].status)
+        np.testing.assert_array_equal(node.plan_ids, before[1])
+        assert node.handled_plans == {1, 2}
+        # A report already in the journal is a duplicate; another episode starts empty.
+        _, reports = _inputs(driver)
+        reports.publish(_report(2, 3))
+        assert not spin_until(executor, lambda: len(node.history) != 5, 1.0)
+        episode.publish(UInt32(data=EPISODE + 1))
+        assert spin_until(executor, lambda: len(node.history) == 0, 10.0)
+
+
+def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
+    """The first sampling call blocks until released: meanwhile a second report is taken and
+    its history published; the overtaken result is dropped, the full history sampled."""
+    release, calls = threading.Event(), []
+
+    def blocking_sampler(prior, history, *args, **kwargs):
+        calls.append(len(history))
+        if len(calls) == 1:
+            assert release.wait(20.0), "the test never released the sampler"
+        return real_sampler(prior, history, *args, **kwargs)
+
+    real_sampler = inference_node.sample_posterior
+    monkeypatch.setattr(inference_node, "sample_posterior", blocking_sampler)
+    spec = launch_nodes("mock")["inference"]
+    threads = partial(MultiThreadedExecutor, num_threads=3)  # as inference_node.main runs it
+    with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=4"], threads) as (
+        node, driver, executor,
+    ):  # fmt: skip
+        histories, samples = [], []
+        driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        prior = driver.create_publisher(type(_prior_msg()), "terrain_prior", qos.LATCHED)
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        prior.publish(_prior_msg())
+        episode.publish(UInt32(data=EPISODE))
+        reports.publish(_report(1, 1))
+        assert spin_until(executor, lambda: calls == [1], 10.0)  # sampling history 1: blocked
+        reports.publish(_report(2, 2))
+        taken = spin_until(executor, lambda: histories and len(histories[-1].segments) == 3, 10.0)
+        release.set()
+        assert taken, "the report was not taken while the sampler ran"
+        assert not samples or samples[-1].history_length != 1
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == 3, 30.0)
+        assert all(s.history_length != 1 for s in samples)  # the overtaken result was dropped
+
+
+def _prior_msg():
+    prior = problems.get("sloper").prior
+    return convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane"))
