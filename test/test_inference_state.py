@@ -11,12 +11,12 @@ from functools import partial
 import numpy as np
 import pytest
 from node_helpers import launch_nodes, node_with_driver
-from ros_helpers import spin_until
 from rclpy.executors import MultiThreadedExecutor
+from ros_helpers import spin_until
 from std_msgs.msg import UInt32
+from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeSamples
 
 from tactile_dock_ros.core import problems
-from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeSamples
 from tactile_dock_ros.nodes import convert, inference_node, qos
 
 pytestmark = pytest.mark.dds
@@ -26,7 +26,7 @@ EPISODE = 41
 def _report(plan_id: int, rows: int) -> ExecutionReport:
     rng = np.random.default_rng(plan_id)
     a = rng.uniform(-0.2, 0.2, size=(rows, 2))
-    history = convert.history_from_segments([]).extend(a, a + [0.0, -0.05], [0] * rows)
+    history = convert.history_from_segments([]).extend(a, a + np.array([0.0, -0.05]), [0] * rows)
     report = convert.Report(plan_id, ExecutionReport.NO_CONTACT, history, a[-1], "", EPISODE)
     return convert.report_to_msg(report, convert.Header(frame_id="dock_plane"))
 
@@ -86,7 +86,7 @@ def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
     spec = launch_nodes("mock")["inference"]
     threads = partial(MultiThreadedExecutor, num_threads=3)  # as inference_node.main runs it
     with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=4"], threads) as (
-        node, driver, executor,
+        _, driver, executor,
     ):  # fmt: skip
         histories, samples = [], []
         driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+import yaml
 from message_samples import build as sample_messages
 from std_msgs.msg import Header
 from tactile_dock_ros.msg import ExecutionReport
@@ -119,7 +120,8 @@ def recorded(tmp_path_factory):
     return path
 
 
-def test_every_episode_message_survives_a_bag_round_trip(tmp_path):
+@pytest.mark.parametrize("storage", bag.STORAGES)
+def test_every_episode_message_survives_a_bag_round_trip(tmp_path, storage):
     samples = sample_messages()
     topics = {t.rsplit("/", 1)[-1]: t for t in bag.EPISODE_TOPICS.values()}
     written = [
@@ -128,8 +130,62 @@ def test_every_episode_message_survives_a_bag_round_trip(tmp_path):
         if kind.rsplit("/", 1)[-1] in samples
     ]
     assert len(written) == len(topics) - 1  # all but diagnostic_msgs/DiagnosticStatus
-    bag.write(tmp_path / "b", written)
+    bag.write(tmp_path / "b", written, storage=storage)
     assert list(bag.read(tmp_path / "b")) == written
+    files = [p.suffix for p in (tmp_path / "b").iterdir() if p.name != "metadata.yaml"]
+    assert files == [{"mcap": ".mcap", "sqlite3": ".db3"}[storage]]
+
+
+def _offered(qos_yaml) -> dict:
+    """Durability, reliability and depth of the one profile in offered_qos_profiles."""
+    (profile,) = yaml.safe_load(qos_yaml) if isinstance(qos_yaml, str) else qos_yaml
+    return {k: profile[k] for k in ("durability", "reliability", "depth")}
+
+
+EXPECTED_QOS = {  # what the nodes publish with (nodes.qos); latched topics replay latched
+    "/terrain_prior": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
+    "/contact_history": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
+    "/shape_samples": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
+    "/plan": {"durability": "volatile", "reliability": "reliable", "depth": 10},
+    "/execution_report": {"durability": "transient_local", "reliability": "reliable", "depth": 32},
+}
+
+
+def test_a_bag_stores_each_topics_qos_and_reads_with_the_mcap_packages(recorded):
+    """Read by others' code (``mcap`` + ``mcap-ros2-support``): rosbag2's profile, each
+    channel's offered QoS as rosbag2 stores it (also in metadata.yaml), decodable messages."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    info = yaml.safe_load((recorded / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["storage_identifier"] == "mcap" and info["version"] == bag.BAG_VERSION
+    in_metadata = {
+        t["topic_metadata"]["name"]: _offered(t["topic_metadata"]["offered_qos_profiles"])
+        for t in info["topics_with_message_count"]
+    }
+    assert in_metadata == EXPECTED_QOS
+    (file,) = recorded.glob("*.mcap")
+    with open(file, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        channels = reader.get_summary().channels.values()
+        in_channels = {c.topic: _offered(c.metadata["offered_qos_profiles"]) for c in channels}
+        assert in_channels == EXPECTED_QOS
+        decoded = [(c.topic, m.log_time, d) for _, c, m, d in reader.iter_decoded_messages()]
+    ours = list(bag.read(recorded))
+    assert [(t, ns) for t, ns, _ in decoded] == [(t, ns) for t, ns, _ in ours]
+    plans = [(d.plan_id, d.episode) for t, _, d in decoded if t == "/plan"]
+    assert plans == [(m.plan_id, m.episode) for t, _, m in ours if t == "/plan"]
+
+
+def test_the_replay_reads_an_sqlite3_bag_as_the_mcap_one(recorded, tmp_path):
+    bag.write(tmp_path / "db3", bag.read(recorded), storage="sqlite3")
+    assert list(bag.read(tmp_path / "db3")) == list(bag.read(recorded))
+    cycles = replay.load_cycles(tmp_path / "db3")
+    assert [c.recorded.plan_id for c in cycles] == [1, 2, 3] * 2
+    assert all(replay.compare(c, replay.replan(c, DEFAULTS))["same"] for c in cycles)
+    with pytest.raises(bag.BagError, match="storage"):
+        bag.write(tmp_path / "other", [], storage="rosbag1")
 
 
 def test_replay_reproduces_every_recorded_plan(recorded, tmp_path, capsys):

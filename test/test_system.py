@@ -92,8 +92,16 @@ def test_infeasible_terrain_ends_gave_up(tmp_path):
     assert record.state == "GAVE_UP", _logs(tmp_path)
     assert all(r.outcome != r.DOCKED for r in record.reports)
     _assert_within_limits(record, tool)
-    # The episode's bag replays offline to exactly the plans the planner node published.
-    bag.write(tmp_path / "bag", record.messages)
+    # The episode's bag replays offline to exactly the plans the planner node published; it
+    # offers each topic with the QoS its publisher offered (latched ones latched).
+    bag.write(tmp_path / "bag", record.messages, offered=record.offered_qos)
+    metadata = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())
+    offered = {
+        t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+        for t in metadata["rosbag2_bagfile_information"]["topics_with_message_count"]
+    }
+    for topic, profile in bag.QOS.items():
+        assert [p["durability"] for p in offered[topic]] == [profile.durability.name.lower()]
     out = tmp_path / "replay.json"
     config = REPO_ROOT / "config" / "mock.yaml"
     assert replay.main([str(tmp_path / "bag"), "--config", str(config), "--json", str(out)]) == 0

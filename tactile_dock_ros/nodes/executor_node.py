@@ -3,7 +3,7 @@
 Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wrench``
 (WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
 planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped); the
-planner resends the plan being executed every second: when no copy arrived for
+planner resends the plan being executed every 0.5 s: when no copy arrived for
 ``producer_timeout`` the planner is gone (crashed, killed) and the arm is stopped (ABORTED,
 detail ``convert.PRODUCER_LOST``; a restarted planner replans);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
@@ -72,8 +72,8 @@ PARAMS = [
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
     Param(
         "producer_timeout",
-        3.0,
-        "stop the arm when no copy of the running plan (resent every 1 s) came for this long",
+        4.0,
+        "stop the arm when no copy of the running plan (resent every 0.5 s) came for this long",
         "s",
         1.5,
         60.0,

@@ -80,6 +80,7 @@ PARAMS = [
     ),
 ]
 
+RESEND_PERIOD = 0.5  # seconds between copies of the plan being executed (executor heartbeat)
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
 
 
@@ -116,7 +117,7 @@ class PlannerNode(Node):
         for msg_type, topic, callback, profile in subscriptions:
             self.create_subscription(msg_type, topic, guarded(self, topic, callback), profile)
         self.create_service(Trigger, "start_episode", self.on_start)
-        self.create_timer(0.5, self.on_timer)
+        self.create_timer(RESEND_PERIOD / 2, self.on_timer)
         self.last_plan = None  # (msg, node-clock seconds when last sent)
         self.stage_start = None  # node-clock seconds when the current wait began
         self.journal = None
@@ -208,12 +209,16 @@ class PlannerNode(Node):
     # ------------------------------------------------------------------ planning
 
     def on_timer(self) -> None:
-        """Resend the plan being executed every second until its report arrives (an executor
-        that matched late still gets it; the executor ignores copies), and abort an episode
-        that waits longer than stage_timeout for samples or a report."""
+        """Resend the plan being executed every RESEND_PERIOD until its report arrives (an
+        executor that matched late still gets it; to the executor the copies say that this node
+        lives: it stops the arm when they stop), and abort an episode that waits longer than
+        stage_timeout for samples or a report."""
         if self.state != RUNNING:
             return
-        if self.awaiting_plan is not None and now_seconds(self) - self.last_plan[1] >= 1.0:
+        if (
+            self.awaiting_plan is not None
+            and now_seconds(self) - self.last_plan[1] >= RESEND_PERIOD
+        ):
             self.plan_pub.publish(self.last_plan[0])
             self.last_plan = (self.last_plan[0], now_seconds(self))
         if now_seconds(self) - self.stage_start <= self.p.stage_timeout:

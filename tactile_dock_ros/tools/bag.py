@@ -1,4 +1,4 @@
-"""ROS 2 bags (rosbag2, sqlite3 storage) of an episode's topics, without the rosbag2 packages.
+"""ROS 2 bags (rosbag2, MCAP or sqlite3 storage) of an episode's topics, without rosbag2.
 
 On the robot, record what ``tools.replay`` needs with::
 
@@ -10,13 +10,22 @@ format, and rclpy (de)serializes the messages (CDR): a bag written here plays wi
 play``, and a bag recorded on a robot reads here. Message definitions for the bag's metadata
 come from this package's installed ``share/tactile_dock_ros/msg`` (the source tree's ``msg/``
 when the package is not installed).
+
+Storage: MCAP by default (rosbag2's default since Iron), sqlite3 on request; metadata version 9
+(Jazzy, Kilted). Each topic's ``offered_qos_profiles`` are stored (in ``metadata.yaml`` and, for
+MCAP, in the channel's metadata, as rosbag2 does): ``ros2 bag play`` offers what was recorded,
+so the latched topics replay TRANSIENT_LOCAL and reach the nodes' TRANSIENT_LOCAL subscribers
+(a bag without profiles plays VOLATILE, which they never match). The profiles are those the
+publishers offered when the caller observed them on the graph, else the nodes' own (``QOS``).
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
+
+from tactile_dock_ros.nodes import qos
 
 # Topics (absolute names, default remappings) and their types, as the nodes publish them.
 EPISODE_TOPICS = {
@@ -27,7 +36,17 @@ EPISODE_TOPICS = {
     "/execution_report": "tactile_dock_ros/msg/ExecutionReport",
     "/episode_status": "diagnostic_msgs/msg/DiagnosticStatus",
 }
-BAG_VERSION = 8  # rosbag2 metadata version written (Jazzy's; Kilted reads it too)
+# The QoS each topic is published with (nodes.qos): what a bag offers when it is played.
+QOS = {
+    "/terrain_prior": qos.LATCHED,
+    "/contact_history": qos.LATCHED,
+    "/shape_samples": qos.LATCHED,
+    "/plan": qos.EVENTS,
+    "/execution_report": qos.REPORTS,
+    "/episode_status": qos.LATCHED,
+}
+BAG_VERSION = 9  # rosbag2 metadata version written (Jazzy's and Kilted's)
+STORAGES = ("mcap", "sqlite3")
 
 
 class BagError(Exception):
@@ -64,24 +83,66 @@ def typestore():
     return store
 
 
-def write(path: Path, messages: Iterable[tuple[str, int, object]]) -> int:
+def rosbags_qos(profile):
+    """rclpy QoSProfile -> rosbags Qos (the same policies; durations as sec, nsec)."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    def duration(d) -> QosTime:
+        return QosTime(*divmod(d.nanoseconds, 10**9))
+
+    return Qos(
+        history=QosHistory[profile.history.name],
+        depth=profile.depth,
+        reliability=QosReliability[profile.reliability.name],
+        durability=QosDurability[profile.durability.name],
+        deadline=duration(profile.deadline),
+        lifespan=duration(profile.lifespan),
+        liveliness=QosLiveliness[profile.liveliness.name],
+        liveliness_lease_duration=duration(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=profile.avoid_ros_namespace_conventions,
+    )
+
+
+def write(
+    path: Path,
+    messages: Iterable[tuple[str, int, object]],
+    storage: str = "mcap",
+    offered: Mapping[str, list] | None = None,
+) -> int:
     """Write ``(topic, receive time ns, rclpy message)`` triples, in order, to a new bag.
 
-    Topic types are ``EPISODE_TOPICS``'s; returns the number of messages written. The bag
+    Topic types are ``EPISODE_TOPICS``'s; ``storage`` one of ``STORAGES``; ``offered`` maps a
+    topic to the rclpy QoS profiles its publishers offered (``EpisodeRecord.offered_qos``), the
+    topic's ``QOS`` where it has none. Returns the number of messages written. The bag
     directory must not exist yet (rosbag2 never overwrites).
     """
     from rclpy.serialization import serialize_message
-    from rosbags.rosbag2 import Writer, WriterError
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
+    if storage not in STORAGES:
+        raise BagError(f"storage {storage!r} is not one of {STORAGES}")
     store, count, connections = typestore(), 0, {}
+    offered = offered or {}
+    plugin = StoragePlugin[storage.upper()]
     try:
-        with Writer(Path(path), version=BAG_VERSION) as writer:
+        with Writer(Path(path), version=BAG_VERSION, storage_plugin=plugin) as writer:
             for topic, stamp_ns, msg in messages:
                 if topic not in connections:
                     if topic not in EPISODE_TOPICS:
                         raise BagError(f"topic {topic!r} is not one of {sorted(EPISODE_TOPICS)}")
+                    profiles = offered.get(topic) or [QOS[topic]]
                     connections[topic] = writer.add_connection(
-                        topic, EPISODE_TOPICS[topic], typestore=store
+                        topic,
+                        EPISODE_TOPICS[topic],
+                        typestore=store,
+                        offered_qos_profiles=[rosbags_qos(p) for p in profiles],
                     )
                 writer.write(connections[topic], int(stamp_ns), serialize_message(msg))
                 count += 1

@@ -44,30 +44,46 @@ def running(
     """Run the launch file's nodes (all, or those named in ``only``) until the block exits.
 
     The nodes' journals go to ``<log_dir>/state`` unless ``arguments`` name a state_directory,
-    so that runs never resume each other's episodes."""
+    so that runs never resume each other's episodes. The yielded dict maps node names to
+    processes; a process put in it (``respawn``) is stopped at the end too."""
     log_dir = Path(log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
-    arguments = {"state_directory": str(log_dir / "state"), **arguments}
-    wanted = None if only is None else set(only)
+    arguments = _with_state(arguments, log_dir)
     processes: dict[str, subprocess.Popen] = {}
-    # The scripts import the package of this source tree, as the work tree's tests do.
-    path = [str(PACKAGE_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
-    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
     try:
         for node in nodes(arguments):
-            if wanted is not None and node.name not in wanted:
-                continue
-            log = open(log_dir / f"{node.name}.log", "w")
-            processes[node.name] = subprocess.Popen(
-                node.command(PACKAGE_ROOT / "scripts", log_dir, sys.executable),
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env={**environment, **node.environment},
-            )
-            log.close()
+            if only is None or node.name in set(only):
+                processes[node.name] = start(node, log_dir)
         yield processes
     finally:
         stop(processes.values())
+
+
+def start(node: launch_xml.NodeLaunch, log_dir: Path, log_mode: str = "w") -> subprocess.Popen:
+    """Start one node's process; its output goes to ``<log_dir>/<node>.log``."""
+    # The scripts import the package of this source tree, as the work tree's tests do.
+    path = [str(PACKAGE_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(path), **node.environment}
+    with open(Path(log_dir) / f"{node.name}.log", log_mode) as log:
+        return subprocess.Popen(
+            node.command(PACKAGE_ROOT / "scripts", log_dir, sys.executable),
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=environment,
+        )
+
+
+def respawn(
+    processes: dict[str, subprocess.Popen], name: str, arguments: dict[str, str], log_dir: Path
+) -> None:
+    """Start node ``name`` again with the launch settings of ``running(arguments, log_dir)``
+    (after it crashed or was killed: fault-injection tests); its log is appended to."""
+    (node,) = [n for n in nodes(_with_state(arguments, log_dir)) if n.name == name]
+    processes[name] = start(node, log_dir, log_mode="a")
+
+
+def _with_state(arguments: dict[str, str], log_dir: Path) -> dict[str, str]:
+    return {"state_directory": str(Path(log_dir) / "state"), **arguments}
 
 
 def stop(processes: Iterable[subprocess.Popen], timeout_s: float = 10.0) -> None:

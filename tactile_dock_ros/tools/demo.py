@@ -1,13 +1,14 @@
 """make demo: bring up the mock profile, run one docking episode, report and plot it.
 
     python -m tactile_dock_ros.tools.demo [--problem sloper] [--seed 0] [--png episode.png]
-        [--bag DIR]
+        [--bag DIR [--storage mcap|sqlite3]]
 
 Starts the five nodes of ``launch/tactile_dock.launch.xml profile:=mock`` as processes (what
 ``ros2 launch`` would start), triggers ``/start_episode``, prints one line per cycle, the result
 and the latency breakdown, writes the episode figure, and exits 0 only when the tool DOCKED.
 Node logs go to ``--log-dir``; ``--bag DIR`` also records the episode's topics as a rosbag2 bag
-for ``python -m tactile_dock_ros.tools.replay DIR``.
+for ``python -m tactile_dock_ros.tools.replay DIR`` (MCAP by default, with the QoS each topic's
+publishers offered, so ``ros2 bag play DIR`` replays the latched topics latched).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--png", type=Path, default=Path("episode.png"))
     parser.add_argument("--log-dir", type=Path, default=None, help="node logs (default: temp)")
     parser.add_argument("--bag", type=Path, default=None, help="record a rosbag2 bag here (new)")
+    parser.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3"), help="bag")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds for the episode")
     args = parser.parse_args(argv)
     if args.bag is not None and args.bag.exists():
@@ -70,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.bag is not None:
         from tactile_dock_ros.tools import bag
 
-        count = bag.write(args.bag, record.messages)
+        count = bag.write(args.bag, record.messages, args.storage, record.offered_qos)
         print(
             f"wrote {count} messages to {args.bag}; "
             f"replay: python -m tactile_dock_ros.tools.replay {args.bag}"

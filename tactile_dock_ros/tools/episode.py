@@ -46,6 +46,7 @@ class EpisodeRecord:
     command_speeds: list = field(default_factory=list)  # m/s of every command to the arm
     wall_seconds: float = 0.0
     messages: list = field(default_factory=list)  # (topic, receive ns, msg) for tools.bag.write
+    offered_qos: dict = field(default_factory=dict)  # bag topic -> its publishers' QoS profiles
 
     @property
     def state(self) -> str:
@@ -137,6 +138,16 @@ class EpisodeClient(Node):
 
     def run(self, executor, timeout_s: float, progress=print) -> EpisodeRecord:
         """Wait for the suite (prior, service, plan/report matches), start, wait for the end."""
+        t0 = self.start(executor, timeout_s)
+        self.spin_until(executor, lambda: self._progress(progress) in FINAL_STATES, timeout_s)
+        self.record.wall_seconds = time.monotonic() - t0
+        # Topics are not ordered with each other: let in-flight reports arrive (bounded).
+        docking = sum(p.decision == DockingPlan.DOCK for p in self.record.plans)
+        self.spin_until(executor, lambda: len(self.record.reports) >= docking, 5.0)
+        return self.record
+
+    def start(self, executor, timeout_s: float) -> float:
+        """Wait for the suite, then start an episode; the time.monotonic() of the start."""
         ready = self.spin_until(
             executor,
             lambda: (
@@ -151,17 +162,16 @@ class EpisodeClient(Node):
         )
         if not ready:
             raise TimeoutError("the node suite did not come up (prior, start_episode, topics)")
+        self.record.offered_qos = {  # as ros2 bag record stores them
+            topic: [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+            for topic in bag.EPISODE_TOPICS
+        }
         t0 = time.monotonic()
         future = self.start_client.call_async(Trigger.Request())
         self.spin_until(executor, future.done, 10.0)
         if not future.done() or not future.result().success:
             raise RuntimeError(f"start_episode failed: {future.result() if future.done() else ''}")
-        self.spin_until(executor, lambda: self._progress(progress) in FINAL_STATES, timeout_s)
-        self.record.wall_seconds = time.monotonic() - t0
-        # Topics are not ordered with each other: let in-flight reports arrive (bounded).
-        docking = sum(p.decision == DockingPlan.DOCK for p in self.record.plans)
-        self.spin_until(executor, lambda: len(self.record.reports) >= docking, 5.0)
-        return self.record
+        return t0
 
     def _progress(self, progress) -> str:
         cycles = [
