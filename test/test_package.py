@@ -20,6 +20,8 @@ ROSDEP_KEYS = {
     "open3d": "python3-open3d-pip",
     "tmg_hmc": "python3-tmg-hmc-pip",
     "rosbags": "python3-rosbags-pip",
+    "mcap": "python3-mcap-pip",
+    "mcap_ros2": "python3-mcap-ros2-support-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
     "catkin_pkg": "python3-catkin-pkg",
