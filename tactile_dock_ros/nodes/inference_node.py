@@ -3,9 +3,10 @@
 Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of
 the current episode count; latched, so reports sent while this node was down arrive when it
 starts) and ``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the
-history). Keeps the history, publishes it latched on ``contact_history`` and, after every change
-while an episode runs, samples the posterior with ``core.sampling.sample_posterior`` and
-publishes ``shape_samples`` (latched) and RViz markers on ``~/markers``.
+history). Keeps the history, publishes it latched on ``contact_history`` (once an episode id
+came) and, after every change while an episode runs, samples the posterior with
+``core.sampling.sample_posterior`` and publishes ``shape_samples`` (latched) and RViz markers on
+``~/markers``.
 
 Restart without loss: with ``state_directory`` set, every report applied is journaled
 (``nodes.journal``, ``<state_directory>/inference.jsonl``) before the history is published, and a
@@ -181,10 +182,13 @@ class InferenceNode(Node):
         self.plan_ids = np.concatenate([self.plan_ids, np.full(len(new), plan_id)])
 
     def changed(self) -> None:
-        """Publish the history now; wake the sampler (its own thread) when an episode runs."""
+        """Publish the episode's history now and wake the sampler (its own thread); nothing
+        before an episode id came (a restarted node would publish an empty history)."""
         with self.lock:
             self.generation += 1
             history, plan_ids, frame_id = self.history, self.plan_ids, self.frame_id
+        if self.episode == 0:
+            return
         stamp = header(self, frame_id)
         self.history_pub.publish(convert.history_to_msg(history, stamp, plan_ids))
         self.sampler.trigger()

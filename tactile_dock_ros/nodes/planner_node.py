@@ -126,8 +126,7 @@ class PlannerNode(Node):
                 self.journal = journal.Journal(Path(self.p.state_directory) / "planner.jsonl")
             except journal.JournalError as err:
                 raise ValueError(f"parameter state_directory: {err}") from err
-            self.resume()
-        self.publish_status()
+        self.publish_status(self.resume() if self.journal is not None else "")
 
     # ------------------------------------------------------------------ inputs
 
@@ -190,14 +189,9 @@ class PlannerNode(Node):
             f"episode {self.episode} cycle {len(self.cycles)}: P_dock={cycle['p_dock']:.3f} "
             f"decision=DOCK outcome={report.outcome_name} ({report.detail})"
         )
-        if report.producer_lost and len(self.cycles) < self.p.max_cycles:
-            self.get_logger().warning(f"episode {self.episode}: attempt interrupted; replanning")
-            self.stage_start = now_seconds(self)
-            self.publish_status()
-            self.maybe_plan()
-        elif report.outcome == ExecutionReport.DOCKED:
+        if report.outcome == ExecutionReport.DOCKED:
             self.finish(DOCKED, report.detail)
-        elif report.outcome == ExecutionReport.ABORTED:
+        elif report.outcome == ExecutionReport.ABORTED and not report.producer_lost:
             self.finish(ABORTED, report.detail)
         elif len(self.cycles) >= self.p.max_cycles:
             self.finish(GAVE_UP, f"cycle budget of {self.p.max_cycles} spent")
@@ -340,11 +334,12 @@ class PlannerNode(Node):
         except journal.JournalError as err:  # go on: the episode is still in memory
             self.get_logger().error(f"journal: {err}; a restart would lose this episode")
 
-    def resume(self) -> None:
-        """Replay the journal of the last episode; resume it when it was running."""
+    def resume(self) -> str:
+        """Replay the journal of the last episode; resume it when it was running. Returns the
+        message of the first episode status."""
         records = self.journal.records
         if not records or records[0].get("event") != "start":
-            return
+            return ""
         try:
             for event in records:
                 self.replay(event)
@@ -352,14 +347,16 @@ class PlannerNode(Node):
             self.get_logger().error(f"{self.journal.path}: bad record ({err}); not resumed")
             self.state, self.episode, self.cycles, self.targets = IDLE, 0, [], []
             self.awaiting_plan = None
-            return
+            return ""
         if self.state != RUNNING:
-            return
+            return ""
         age = time.time() - records[-1].get("wall_time", 0.0)
         if age > self.p.resume_timeout:
-            self.awaiting_plan = None
-            self.finish(ABORTED, f"not resumed: its last event is {age:.0f} s old")
-            return
+            why = f"not resumed: its last event is {age:.0f} s old"
+            self.state, self.awaiting_plan = ABORTED, None
+            self.log({"event": "finish", "state": ABORTED, "why": why})
+            self.get_logger().warning(f"episode {self.episode}: {why}")
+            return why
         self.stage_start = now_seconds(self)
         self.episode_pub.publish(UInt32(data=self.episode))
         waiting = f"plan {self.awaiting_plan}" if self.awaiting_plan else "samples"
@@ -367,6 +364,7 @@ class PlannerNode(Node):
             f"episode {self.episode}: resumed after a restart ({len(self.cycles)} cycles, "
             f"waiting for {waiting})"
         )
+        return "resumed after a restart"
 
     def replay(self, event: dict) -> None:
         kind = event["event"]
