@@ -62,3 +62,8 @@ def test_a_missing_journal_is_empty_and_an_unwritable_one_an_error(tmp_path):
     blocker.write_text("")
     with pytest.raises(journal.JournalError, match="cannot create"):
         journal.Journal(blocker / "sub" / "j.jsonl")
+    # A node's journal: none without a directory; an unusable one names the parameter.
+    assert journal.for_node("", "planner") is None
+    assert journal.for_node(str(tmp_path), "planner").path == tmp_path / "planner.jsonl"
+    with pytest.raises(ValueError, match="parameter state_directory"):
+        journal.for_node(str(blocker), "planner")

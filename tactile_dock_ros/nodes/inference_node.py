@@ -24,7 +24,6 @@ from __future__ import annotations
 import threading
 from collections import deque
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -69,34 +68,20 @@ class InferenceNode(Node):
         self.stash: deque = deque(maxlen=STASHED_REPORTS)
         self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
         self.generation = 0  # counts state changes; the sampler publishes only current results
-        self.journal = None
-        if self.p.state_directory:
-            try:
-                self.journal = journal.Journal(Path(self.p.state_directory) / "inference.jsonl")
-            except journal.JournalError as err:
-                raise ValueError(f"parameter state_directory: {err}") from err
+        self.journal = journal.for_node(self.p.state_directory, "inference")
         self.history_pub = self.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
         self.samples_pub = self.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
         inputs = MutuallyExclusiveCallbackGroup()
         self.sampler = self.create_guard_condition(self.sample, MutuallyExclusiveCallbackGroup())
-        self.create_subscription(
-            ShapeDistribution,
-            "terrain_prior",
-            guarded(self, "prior", self.on_prior),
-            qos.LATCHED,
-            callback_group=inputs,
-        )
-        self.create_subscription(
-            ExecutionReport,
-            "execution_report",
-            guarded(self, "report", self.on_report),
-            qos.REPORTS,
-            callback_group=inputs,
-        )
-        self.create_subscription(
-            UInt32, "episode", self.on_episode, qos.LATCHED, callback_group=inputs
-        )
+        subscriptions = [
+            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED),
+            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS),
+            (UInt32, "episode", self.on_episode, qos.LATCHED),
+        ]
+        for msg_type, topic, callback, profile in subscriptions:
+            callback = guarded(self, topic, callback)
+            self.create_subscription(msg_type, topic, callback, profile, callback_group=inputs)
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         prior = convert.shape_from_msg(msg)

@@ -94,3 +94,15 @@ class Journal:
         except OSError as err:
             raise JournalError(f"cannot write {self.path}: {err}") from err
         self.records = list(records)
+
+
+def for_node(state_directory: str, name: str) -> Journal | None:
+    """The journal ``<state_directory>/<name>.jsonl`` of a node, None when the node's
+    ``state_directory`` parameter is empty (no journal); an unusable one is a ValueError that
+    names the parameter, which stops the node at start."""
+    if not state_directory:
+        return None
+    try:
+        return Journal(Path(state_directory) / f"{name}.jsonl")
+    except JournalError as err:
+        raise ValueError(f"parameter state_directory: {err}") from err

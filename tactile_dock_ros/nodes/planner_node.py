@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import base64
 import time
-from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -120,12 +119,7 @@ class PlannerNode(Node):
         self.create_timer(RESEND_PERIOD / 2, self.on_timer)
         self.last_plan = None  # (msg, node-clock seconds when last sent)
         self.stage_start = None  # node-clock seconds when the current wait began
-        self.journal = None
-        if self.p.state_directory:
-            try:
-                self.journal = journal.Journal(Path(self.p.state_directory) / "planner.jsonl")
-            except journal.JournalError as err:
-                raise ValueError(f"parameter state_directory: {err}") from err
+        self.journal = journal.for_node(self.p.state_directory, "planner")
         self.publish_status(self.resume() if self.journal is not None else "")
 
     # ------------------------------------------------------------------ inputs
