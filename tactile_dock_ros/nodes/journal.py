@@ -5,9 +5,10 @@ reads the lines back when it starts (docs/nodes.md, "Restart without loss"). Cra
 
 * ``append`` writes the whole line with one ``write`` and ``fsync``s it before returning, so a
   record the node acted on (published a result for) is on disk;
-* a crash during ``append`` can leave a torn last line (no newline, or not JSON): ``read``
-  drops it and ``Journal`` truncates it before appending, so the next record starts on a line
-  of its own; a bad line anywhere else is corruption and raises ``JournalError``;
+* a crash during ``append`` can leave a prefix of the line, without its newline: ``read`` drops
+  the text after the last newline and ``Journal`` truncates it before appending, so the next
+  record starts on a line of its own; a complete line that is not a JSON object is corruption
+  and raises ``JournalError`` (no guessing at a partial state);
 * ``reset`` replaces the file atomically (temporary file, ``fsync``, ``rename``, directory
   ``fsync``): a reader sees the old journal or the new one, never a mixture.
 """

@@ -96,7 +96,11 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
     try:
         with bringup.running(arguments, log_dir) as processes:
             client.start(executor, timeout_s)
-            wait("the second plan", lambda: len(record.plans) >= 2)
+            ended = episode.FINAL_STATES
+            wait("the second plan", lambda: len(record.plans) >= 2 or record.state in ended)
+            if len(record.plans) < 2:  # e.g. a sensor timeout on a starved machine
+                why = record.status.message if record.status else "no status"
+                raise RuntimeError(f"the episode ended before the fault: {why} (logs: {log_dir})")
             episode_id, killed_during = record.plans[-1].episode, record.plans[-1].plan_id
             before = convert.history_from_segments(histories[-1][1].segments)
             processes[node].kill()  # SIGKILL: no shutdown, no last words
@@ -164,12 +168,18 @@ def main(argv: list[str] | None = None) -> int:
     for node in args.node:
         for i in range(args.repeat):
             log_dir = Path(tempfile.mkdtemp(prefix=f"restart_{node}_{i}_"))
-            runs.append(run(node, log_dir, args.seed))
+            try:
+                runs.append(run(node, log_dir, args.seed))
+            except (RuntimeError, TimeoutError) as err:  # a failed run is a row, not the end
+                runs.append({"node": node, "seed": args.seed, "error": str(err)})
             print(json.dumps(runs[-1]))
     if args.json is not None:
         args.json.write_text(json.dumps(runs, indent=1))
     ok = all(
-        r["history_kept"] and r["same_episode"] and r["history_after"] == r["history_expected"]
+        "error" not in r
+        and r["history_kept"]
+        and r["same_episode"]
+        and r["history_after"] == r["history_expected"]
         for r in runs
     )
     return 0 if ok else 1
