@@ -4,7 +4,7 @@
         [--seed 5] [--json OUT]
 
 Brings up the mock profile (five processes, ``tools.bringup``), starts an episode and, once the
-second plan is out (the executor runs it; the history holds the first attempt's evidence),
+second plan is out and the arm moves on it (the history holds the first attempt's evidence),
 SIGKILLs the node, waits for what happens without it, then starts it again with the same launch
 settings and waits until the planner publishes its next plan. Measured per run:
 
@@ -102,6 +102,9 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
                 why = record.status.message if record.status else "no status"
                 raise RuntimeError(f"the episode ended before the fault: {why} (logs: {log_dir})")
             episode_id, killed_during = record.plans[-1].episode, record.plans[-1].plan_id
+            t_plan = now()
+            # The executor runs it (else nobody resends it while the planner is down).
+            wait("the arm to move", lambda: any(t > t_plan and not _zero(m) for t, m in commands))
             before = convert.history_from_segments(histories[-1][1].segments)
             processes[node].kill()  # SIGKILL: no shutdown, no last words
             processes[node].wait()
