@@ -114,7 +114,7 @@ class ExecutorNode(Node):
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
         self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
-        self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the plan
+        self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the run plan
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         self.create_subscription(
@@ -158,7 +158,6 @@ class ExecutorNode(Node):
                 self.plan_heard = (key, now_seconds(self))
             return
         self.seen_plans.add(key)
-        self.plan_heard = (key, now_seconds(self))
         plan = convert.plan_from_msg(msg)
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
@@ -167,6 +166,7 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
             return
         self.pending = (plan, now_seconds(self))
+        self.plan_heard = (key, now_seconds(self))  # its copies: the planner lives
         self.get_logger().info(
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )

@@ -12,11 +12,12 @@ come from this package's installed ``share/tactile_dock_ros/msg`` (the source tr
 when the package is not installed).
 
 Storage: MCAP by default (rosbag2's default since Iron), sqlite3 on request; metadata version 9
-(Jazzy, Kilted). Each topic's ``offered_qos_profiles`` are stored (in ``metadata.yaml`` and, for
-MCAP, in the channel's metadata, as rosbag2 does): ``ros2 bag play`` offers what was recorded,
-so the latched topics replay TRANSIENT_LOCAL and reach the nodes' TRANSIENT_LOCAL subscribers
-(a bag without profiles plays VOLATILE, which they never match). The profiles are those the
-publishers offered when the caller observed them on the graph, else the nodes' own (``QOS``).
+(Jazzy's; later rosbag2 reads it). Each topic's ``offered_qos_profiles`` are stored (in
+``metadata.yaml`` and, for MCAP, in the channel's metadata, as rosbag2 does): ``ros2 bag play``
+offers what was recorded, so the latched topics replay TRANSIENT_LOCAL and reach the nodes'
+TRANSIENT_LOCAL subscribers (a bag without profiles plays VOLATILE, which they never match).
+The profiles are those the publishers offered when the caller observed them on the graph, else
+the nodes' own (``QOS``).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ QOS = {
     "/execution_report": qos.REPORTS,
     "/episode_status": qos.LATCHED,
 }
-BAG_VERSION = 9  # rosbag2 metadata version written (Jazzy's and Kilted's)
+BAG_VERSION = 9  # rosbag2 metadata version written (Jazzy's; later rosbag2 reads it)
 STORAGES = ("mcap", "sqlite3")
 
 
