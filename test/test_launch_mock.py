@@ -11,6 +11,7 @@ pytest.importorskip(
     "install; test_system.py covers the same processes here",
 )
 
+import tempfile
 import unittest
 
 import launch_testing.actions
@@ -28,7 +29,12 @@ def generate_test_description():
     share = get_package_share_directory("tactile_dock_ros")
     suite = IncludeLaunchDescription(
         AnyLaunchDescriptionSource(f"{share}/launch/tactile_dock.launch.xml"),
-        launch_arguments={"profile": "mock", "prior_source": "problem", "seed": "0"}.items(),
+        launch_arguments={
+            "profile": "mock",
+            "prior_source": "problem",
+            "seed": "0",
+            "state_directory": tempfile.mkdtemp(),  # never resume another run's episode
+        }.items(),
     )
     return launch.LaunchDescription([suite, launch_testing.actions.ReadyToTest()])
 
