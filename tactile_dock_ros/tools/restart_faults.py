@@ -20,7 +20,9 @@ settings and waits until the planner publishes its next plan. Measured per run:
   replay, sampling and planning on this machine).
 
 The executor's ``producer_timeout`` is set to ``PRODUCER_TIMEOUT_S`` (a config copy), so the
-planner's death stops the arm before the running attempt would end on its own.
+planner's death stops the arm before the running attempt would end on its own, and its
+``sensor_timeout`` to ``SENSOR_TIMEOUT_S``: these runs are about restarts, and on a starved
+machine the mock's 0.5 s aborted episodes before the fault (ABORTED, sensor timeout).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 import yaml
 
 PRODUCER_TIMEOUT_S = 1.5
+SENSOR_TIMEOUT_S = 2.0
 NODES = ("inference", "planner")
 
 
@@ -43,7 +46,8 @@ def _config(log_dir: Path) -> Path:
     from tactile_dock_ros.tools import bringup
 
     config = yaml.safe_load((bringup.PACKAGE_ROOT / "config" / "mock.yaml").read_text())
-    config["executor"]["ros__parameters"]["producer_timeout"] = PRODUCER_TIMEOUT_S
+    executor = config["executor"]["ros__parameters"]
+    executor["producer_timeout"], executor["sensor_timeout"] = PRODUCER_TIMEOUT_S, SENSOR_TIMEOUT_S
     path = log_dir / "mock_fault.yaml"
     path.write_text(yaml.safe_dump(config))
     return path
