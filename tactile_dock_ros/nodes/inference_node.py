@@ -19,10 +19,11 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 from tactile_dock_ros.nodes import convert, markers, qos
-from tactile_dock_ros.nodes.common import guarded, header, run
+from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
+    PLANE_FRAME_ID,
     Param("method", "hmc", "posterior sampler", choices=("hmc", "gibbs", "mh", "rejection")),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
@@ -37,35 +38,37 @@ class InferenceNode(Node):
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
         self.last_z = None  # (N, m) previous posterior in z, for the sampler's warm start
-        self.frame_id = "dock_plane"
+        self.frame_id = self.p.plane_frame_id
         self.history = History()
         self.plan_ids = np.zeros(0, int)
         self.handled_plans: set[int] = set()
         self.episode = 0
+        self.past_episodes: set[int] = set()  # ids that ended here: a late copy is no new one
         self.history_pub = self.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
         self.samples_pub = self.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
-        self.create_subscription(
-            ShapeDistribution, "terrain_prior", guarded(self, "prior", self.on_prior), qos.LATCHED
-        )
-        self.create_subscription(
-            ExecutionReport, "execution_report", guarded(self, "report", self.on_report), qos.EVENTS
-        )
-        self.create_subscription(UInt32, "episode", self.on_episode, qos.LATCHED)
+        frame = self.frame_id
+        subscribe(self, ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, frame)
+        subscribe(self, ExecutionReport, "execution_report", self.on_report, qos.EVENTS, frame)
+        subscribe(self, UInt32, "episode", self.on_episode, qos.LATCHED)
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         self.prior = convert.shape_from_msg(msg)
         self.last_z = None
-        self.frame_id = msg.header.frame_id or self.frame_id
         self.get_logger().info(
             f"prior: {self.prior.n_vertices} vertices, {self.prior.n_basis} basis columns"
         )
         self.update()
 
     def on_episode(self, msg: UInt32) -> None:
-        if msg.data == self.episode:
+        episode = convert.episode_from_msg(msg)
+        if episode == self.episode:
             return
-        self.episode = msg.data
+        if episode in self.past_episodes:
+            self.get_logger().warning(f"episode {episode} is over: ignored (late or resent)")
+            return
+        self.past_episodes.add(self.episode)
+        self.episode = episode
         self.history, self.plan_ids = History(), np.zeros(0, int)
         self.last_z = None
         self.handled_plans.clear()
@@ -80,8 +83,8 @@ class InferenceNode(Node):
                 f"episode is {self.episode})"
             )
             return
-        if report.plan_id in self.handled_plans:
-            self.get_logger().warning(f"plan {report.plan_id}: duplicate report ignored")
+        if report.plan_id <= max(self.handled_plans, default=0):  # plans run one at a time
+            self.get_logger().warning(f"plan {report.plan_id}: duplicate or late report ignored")
             return
         self.handled_plans.add(report.plan_id)
         new = report.history
