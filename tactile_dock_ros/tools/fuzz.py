@@ -35,12 +35,13 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
+from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, UInt32
 
 from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.history import History
 from tactile_dock_ros.msg import ContactHistory, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.tools import bringup, fuzz_messages
@@ -60,7 +61,9 @@ FRAME_CHECKED = {
     "/arm/cmd_twist",
     "/camera/depth/image_raw",
 }
-EPISODES, SEED_PLANS, PROBE_PLAN = (1, 2), (1, 2), 3  # planner ids are clock ms: never 1, 2
+# The seeded state: episode 2 after episode 1, reports of plans 1 and 3 (plan 2 is then out of
+# order); the probe is plan 4. The planner's episode ids are clock milliseconds, never 1 or 2.
+EPISODES, SEED_PLANS, PROBE_PLAN = (1, 2), (1, 3), 4
 
 
 def _type_name(msg_type) -> str:
@@ -84,11 +87,11 @@ def bases(now_s: int, live: dict) -> dict:
     K = np.array([[30.0, 0.0, 15.5], [0.0, 30.0, 11.5], [0.0, 0.0, 1.0]])
     out = {
         "/terrain_prior": convert.shape_to_msg(prior, plane),
-        "/contact_history": convert.history_to_msg(history, plane, [1, 2]),
+        "/contact_history": convert.history_to_msg(history, plane, list(SEED_PLANS)),
         "/shape_samples": convert.samples_to_msg(
             np.repeat(prior.mean_vertices[None], 4, axis=0), plane, "hmc", 4.0, len(history)
         ),
-        "/plan": fuzz_messages.valid_plan(EPISODES[-1], PROBE_PLAN, plane),
+        "/plan": fuzz_messages.valid_plan(EPISODES[-1], PROBE_PLAN + 1, plane),
         "/execution_report": fuzz_messages.valid_report(EPISODES[-1], SEED_PLANS[0], -0.3, plane),
         "/episode": UInt32(data=EPISODES[-1]),
         "/episode_status": _status("IDLE", 0),
@@ -105,31 +108,23 @@ def _status(state: str, episode: int) -> DiagnosticStatus:
     return DiagnosticStatus(message=state, values=[KeyValue(key="episode", value=str(episode))])
 
 
-def _seed_history():
-    header = Header(frame_id=PLANE_FRAME)
-    reports = [
-        fuzz_messages.valid_report(EPISODES[-1], p, -0.3 + 0.1 * p, header) for p in SEED_PLANS
-    ]
-    history = convert.report_from_msg(reports[0]).history
-    for r in reports[1:]:
-        h = convert.report_from_msg(r).history
-        history = history.extend(h.a, h.b, h.status)
-    return history
+def _seed_reports(header: Header) -> list:
+    return [fuzz_messages.valid_report(EPISODES[-1], p, -0.3 + 0.1 * p, header) for p in SEED_PLANS]
+
+
+def _seed_history() -> History:
+    histories = [convert.report_from_msg(r).history for r in _seed_reports(Header())]
+    return History().extend(
+        *(np.concatenate([getattr(h, f) for h in histories]) for f in ("a", "b", "status"))
+    )
 
 
 def seed_messages(now_s: int) -> list[tuple[str, object]]:
     """(topic, message) in order: the state the fuzzing starts from (an episode 2 after an
-    episode 1, with the reports of plans 1 and 2 in the contact history)."""
-    plane = _header(now_s, PLANE_FRAME)
-    return [
-        *[("/episode", UInt32(data=e)) for e in EPISODES],
-        *[
-            (
-                "/execution_report",
-                fuzz_messages.valid_report(EPISODES[-1], p, -0.3 + 0.1 * p, plane),
-            )
-            for p in SEED_PLANS
-        ],
+    episode 1, with the reports of plans 1 and 3 in the contact history)."""
+    reports = _seed_reports(_header(now_s, PLANE_FRAME))
+    return [("/episode", UInt32(data=e)) for e in EPISODES] + [
+        ("/execution_report", r) for r in reports
     ]
 
 
@@ -252,7 +247,11 @@ class Fuzzer(Node):
         """Topic -> {type, subscribers} from the ROS graph, for the nodes ``names``."""
         topics: dict[str, dict] = {}
         for name in names:
-            for topic, types in self.get_subscriber_names_and_types_by_node(name, "/"):
+            try:
+                found = self.get_subscriber_names_and_types_by_node(name, "/")
+            except NodeNameNonExistentError:  # not discovered yet
+                continue
+            for topic, types in found:
                 entry = topics.setdefault(topic, {"type": types[0], "subscribers": []})
                 entry["subscribers"].append(name)
         return topics
@@ -282,9 +281,16 @@ def _msg_type(type_name: str):
 
 
 def over_dds(
-    messages: int, seed: int, log_dir: Path, episode_timeout_s: float = 0.0, progress=print
+    messages: int,
+    seed: int,
+    log_dir: Path,
+    episode_timeout_s: float = 0.0,
+    expected: set[tuple[str, str]] = frozenset(),
+    progress=print,
 ) -> dict:
-    """Fuzz the running suite; ``episode_timeout_s`` > 0 then runs a normal episode."""
+    """Fuzz the running suite; ``episode_timeout_s`` > 0 then runs a normal episode.
+    ``expected``: (node, topic) subscriptions (from :func:`in_process`) the graph must show
+    before the fuzzing starts (discovery is gradual); every one the graph shows is fuzzed."""
     log_dir = Path(log_dir)
     context = Context()
     rclpy.init(context=context)
@@ -307,9 +313,14 @@ def over_dds(
                 raise TimeoutError(
                     f"the suite did not come up: {needed - set(fuzzer.live)} missing"
                 )
-            _spin_until(
-                executor, lambda: set(names) <= _subscribers(fuzzer.subscriptions_of(names)), 30.0
-            )
+
+            def discovered():
+                pairs = _pairs(fuzzer.subscriptions_of(names))
+                return set(names) <= {n for n, _ in pairs} and expected <= pairs
+
+            if not _spin_until(executor, discovered, 60.0):
+                missing = expected - _pairs(fuzzer.subscriptions_of(names))
+                raise TimeoutError(f"subscriptions not in the ROS graph: {sorted(missing)}")
             topics = fuzzer.subscriptions_of(names)
             for entry in topics.values():
                 fuzz_messages.table(entry["type"], False)  # KeyError: a type nobody can fuzz
@@ -351,9 +362,9 @@ def over_dds(
             probe = fuzz_messages.valid_report(
                 EPISODES[-1], PROBE_PLAN, 0.0, _header(now_s, PLANE_FRAME)
             )
-            expected = [*baseline, (0.0, 0.5, 0.0, 0.4, 0, PROBE_PLAN)]
+            wanted = [*baseline, (0.0, 0.5, 0.0, 0.4, 0, PROBE_PLAN)]
             publishers["/execution_report"].publish(probe)
-            answered = _spin_until(executor, lambda: fuzzer.history_rows() == expected, 120.0)
+            answered = _spin_until(executor, lambda: fuzzer.history_rows() == wanted, 120.0)
             result["history"] = {
                 "seeded_segments": len(baseline),
                 "after_probe_segments": len(fuzzer.history_rows()),
@@ -377,8 +388,9 @@ def over_dds(
     return result
 
 
-def _subscribers(topics: dict) -> set[str]:
-    return {name for entry in topics.values() for name in entry["subscribers"]}
+def _pairs(topics: dict) -> set[tuple[str, str]]:
+    """(node, topic) of every subscription in ``subscriptions_of``'s answer."""
+    return {(name, topic) for topic, entry in topics.items() for name in entry["subscribers"]}
 
 
 def _seed(fuzzer, executor, publishers, now_s: int) -> bool:
@@ -406,6 +418,8 @@ def _publish(fuzzer, executor, publishers, topics, base, messages, seed, now_s, 
             stats[topic]["malformed"] += m.malformed
             stats[topic]["kinds"][m.kind] += 1
         executor.spin_once(timeout_sec=0.0)
+        if not fuzzer.context.ok():  # rclpy's SIGINT handler shut it down
+            raise KeyboardInterrupt
         if any(p.poll() is not None for p in processes.values()):
             break  # a node died: the figures say which
     return stats
@@ -468,7 +482,8 @@ def run(args) -> dict:
     log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="bench_fuzz_"))
     with tempfile.TemporaryDirectory() as params_dir:
         local = in_process(args.messages, args.seed, Path(params_dir))
-    dds = over_dds(args.messages, args.seed, log_dir, args.episode_timeout)
+    expected = {(n, t) for n, rows in local.items() for t, r in rows.items() if isinstance(r, dict)}
+    dds = over_dds(args.messages, args.seed, log_dir, args.episode_timeout, expected)
     summary = summarize(local, dds)
     for key, value in summary.items():
         print(f"{key:<42} {value}")

@@ -41,7 +41,8 @@ class Mutation:
 @dataclass
 class FuzzContext:
     """What the mutations refer to: the node clock (s), the episode ids the nodes have seen
-    (oldest first, the last one current) and the plan ids already reported in it."""
+    (oldest first, the last one current) and the plan ids already reported in it (with a gap
+    below the last: that id is out of order)."""
 
     now_s: int
     episodes: tuple[int, ...]
@@ -217,7 +218,7 @@ def _report_rows() -> list[Row]:
         ("stop_point NaN", True, _set("stop_point.x", NAN)),
         ("segment plan_id mismatched", True, _report_id(lambda ctx: 0, segments_too=False)),
         ("plan_id duplicated", False, _report_id(lambda ctx: ctx.reported_plans[-1])),
-        ("plan_id out of order", False, _report_id(lambda ctx: ctx.reported_plans[0])),
+        ("plan_id out of order", False, _report_id(lambda ctx: ctx.reported_plans[-1] - 1)),
         ("episode of the past", False, _set("episode", lambda rng, ctx: ctx.episodes[0])),
         ("episode unknown", False, _set("episode", lambda rng, ctx: int(rng.integers(3, 2**31)))),
     ]  # fmt: skip
