@@ -27,7 +27,7 @@ from tactile_dock_ros.nodes.validate import MessageError
 
 FLOATS = st.floats(allow_nan=True, allow_infinity=True)
 SMALL = st.floats(-2.0, 2.0) | FLOATS
-EXAMPLES = settings(max_examples=150, deadline=None)
+EXAMPLES = settings(max_examples=100, deadline=None)
 
 
 def _convert(fn, *args):

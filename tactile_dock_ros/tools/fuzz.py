@@ -49,6 +49,11 @@ from tactile_dock_ros.tools.fuzz_messages import FuzzContext
 
 ARGUMENTS = {"profile": "mock", "problem": "sloper", "seed": "0", "prior_source": "depth"}
 PLANE_FRAME, BASE_FRAME = "dock_plane", "base_link"  # config/mock.yaml
+# Topics whose messages on the running suite are the bases of their mutations (over DDS).
+LIVE_TOPICS = (
+    "/terrain_prior", "/episode_status", "/arm/tool_pose", "/ft_sensor/wrench",
+    "/camera/depth/image_raw", "/camera/depth/camera_info",
+)  # fmt: skip
 # Topics whose subscribers check the frame_id (a wrong one is malformed there).
 FRAME_CHECKED = {
     "/terrain_prior",
@@ -301,14 +306,7 @@ def over_dds(
     try:
         with bringup.running(ARGUMENTS, log_dir) as processes:
             names = list(processes)
-            needed = {
-                "/terrain_prior",
-                "/contact_history",
-                "/camera/depth/image_raw",
-                "/camera/depth/camera_info",
-                "/arm/tool_pose",
-                "/ft_sensor/wrench",
-            }
+            needed = {*LIVE_TOPICS, "/contact_history"}
             if not _spin_until(executor, lambda: needed <= set(fuzzer.live), 120.0):
                 raise TimeoutError(
                     f"the suite did not come up: {needed - set(fuzzer.live)} missing"
@@ -338,18 +336,7 @@ def over_dds(
             seeded = _seed(fuzzer, executor, publishers, now_s)
             baseline = fuzzer.history_rows()
             result["history_seeded"] = seeded and len(baseline) == len(SEED_PLANS)
-            live = {
-                t: fuzzer.live[t]
-                for t in (
-                    "/terrain_prior",
-                    "/episode_status",
-                    "/arm/tool_pose",
-                    "/ft_sensor/wrench",
-                    "/camera/depth/image_raw",
-                    "/camera/depth/camera_info",
-                )
-            }
-            base = bases(now_s, live)
+            base = bases(now_s, {t: fuzzer.live[t] for t in LIVE_TOPICS})
             t0 = time.monotonic()
             result["topics"] = _publish(
                 fuzzer, executor, publishers, topics, base, messages, seed, now_s, processes
@@ -358,20 +345,8 @@ def over_dds(
             for topic, publisher in publishers.items():
                 if topic != "/execution_report":
                     fuzzer.destroy_publisher(publisher)
-            # The probe: a valid report of the next plan must extend the history by itself.
-            probe = fuzz_messages.valid_report(
-                EPISODES[-1], PROBE_PLAN, 0.0, _header(now_s, PLANE_FRAME)
-            )
-            wanted = [*baseline, (0.0, 0.5, 0.0, 0.4, 0, PROBE_PLAN)]
-            publishers["/execution_report"].publish(probe)
-            answered = _spin_until(executor, lambda: fuzzer.history_rows() == wanted, 120.0)
-            result["history"] = {
-                "seeded_segments": len(baseline),
-                "after_probe_segments": len(fuzzer.history_rows()),
-                "probe_answered": answered,
-                "corrupted": not answered,
-            }
-            fuzzer.destroy_publisher(publishers["/execution_report"])
+            result["history"] = _probe(fuzzer, executor, publishers["/execution_report"], now_s,
+                                       baseline)  # fmt: skip
             if episode_timeout_s > 0:
                 result["episode"] = _normal_episode(context, executor, episode_timeout_s, progress)
             result["exit_codes"] = {n: p.poll() for n, p in processes.items()}
@@ -386,6 +361,23 @@ def over_dds(
     result["deaths"] = sum(v["died"] for v in result["nodes"].values())
     result["tracebacks"] = sum(v["tracebacks"] for v in result["nodes"].values())
     return result
+
+
+def _probe(fuzzer, executor, publisher, now_s: int, baseline: list) -> dict:
+    """A valid report of the next plan must extend the history by its segment alone."""
+    probe = fuzz_messages.valid_report(EPISODES[-1], PROBE_PLAN, 0.0, _header(now_s, PLANE_FRAME))
+    probe_row = (0.0, 0.5, 0.0, 0.4, 0, PROBE_PLAN)
+    publisher.publish(probe)
+    answered = _spin_until(executor, lambda: fuzzer.history_rows() == [*baseline, probe_row], 120.0)
+    rows = fuzzer.history_rows()
+    fuzzer.destroy_publisher(publisher)
+    return {
+        "seeded_segments": len(baseline),
+        "after_probe_segments": len(rows),
+        "probe_answered": answered,
+        "corrupted": rows[: len(baseline)] != baseline
+        or any(r != probe_row for r in rows[len(baseline) :]),
+    }
 
 
 def _pairs(topics: dict) -> set[tuple[str, str]]:
