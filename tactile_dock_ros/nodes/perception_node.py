@@ -46,6 +46,11 @@ PARAMS = [
         choices=("first_frame", "on_request"),
     ),
     Param("seed", 0, "seed of the occlusion sampler", "", 0, 2**31 - 1),
+    Param(
+        "camera_frame_id",
+        "",
+        "frame of the depth image and camera info ('': any, the two must agree)",
+    ),
 ]
 
 
@@ -71,8 +76,9 @@ class PerceptionNode(Node):
             self.config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
-        subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR)
-        subscribe(self, Image, "depth/image", self.on_image, qos.SENSOR)
+        camera = self.p.camera_frame_id or None
+        subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
+        subscribe(self, Image, "depth/image", self.on_image, qos.SENSOR, camera)
 
     def on_capture(self, request, response):
         if self.p.prior_source == "problem":

@@ -65,6 +65,7 @@ FRAME_CHECKED = {
     "/ft_sensor/wrench",
     "/arm/cmd_twist",
     "/camera/depth/image_raw",
+    "/camera/depth/camera_info",
 }
 # The seeded state: episode 2 after episode 1, reports of plans 1 and 3 (plan 2 is then out of
 # order); the probe is plan 4. The planner's episode ids are clock milliseconds, never 1 or 2.
