@@ -3,7 +3,9 @@
 Every ``*_from_msg`` function validates what it reads (array sizes, finiteness, known status
 values, unit vectors) and raises :class:`MessageError` with a message saying which field is
 wrong; nodes log that message and drop the input, so a malformed message never reaches the
-core or a node's state. Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
+core or a node's state. The checks it shares with the subscription guard (``common.subscribe``:
+finiteness, size limits read from the length fields, stamps, frames) are in ``nodes.validate``.
+Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
 
 The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
 not available everywhere this runs, so the transform is a node parameter, see design.md).
@@ -38,11 +40,9 @@ from tactile_dock_ros.msg import (
     ShapeSamples,
 )
 from tactile_dock_ros.nodes import validate
-from tactile_dock_ros.nodes.validate import MessageError, check_frame, finite
+from tactile_dock_ros.nodes.validate import MessageError, finite
 from tactile_dock_ros.perception import depth as depth_codec
 from tactile_dock_ros.perception.config import PerceptionError
-
-__all__ = ["MessageError", "check_frame"]  # re-exported: the nodes' one conversion module
 
 # Tolerance (dimensionless) on |load_direction| = 1 and on plane axis orthonormality.
 UNIT_TOLERANCE = 1e-3
