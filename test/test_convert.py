@@ -9,7 +9,7 @@ from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
 
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
-from tactile_dock_ros.nodes import convert
+from tactile_dock_ros.nodes import convert, validate
 from tactile_dock_ros.nodes.convert import MessageError
 
 HEADER = Header(frame_id="dock_plane")
@@ -213,10 +213,10 @@ def test_hardware_messages_round_trip_and_frames_are_checked():
     np.testing.assert_array_equal(convert.wrench_force(convert.wrench_to_msg(force, header)), force)
     twist = convert.twist_to_msg(np.array([0.01, 0.0, -0.02]), header)
     np.testing.assert_array_equal(convert.twist_velocity(twist, _vertical_plane()), [0.01, -0.02])
-    convert.check_frame("pose", pose, "base_link")
+    validate.check_frame("pose", pose, "base_link")
     pose.header.frame_id = "tool0"
     with pytest.raises(MessageError, match="'tool0', expected 'base_link'"):
-        convert.check_frame("pose", pose, "base_link")
+        validate.check_frame("pose", pose, "base_link")
     pose.pose.orientation.x, pose.pose.orientation.w = 1.0, 1.0  # not normalized
     with pytest.raises(MessageError, match="unit quaternion"):
         convert.pose_rotation(pose)

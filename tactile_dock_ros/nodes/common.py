@@ -1,9 +1,11 @@
-"""Glue shared by every node: plane-frame parameters, stamped headers, guarded callbacks, main."""
+"""Glue shared by every node: plane-frame parameters, stamped headers, guarded subscriptions,
+main."""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
 
 import rclpy
@@ -11,8 +13,12 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from std_msgs.msg import Header
 
+from tactile_dock_ros.nodes import validate
 from tactile_dock_ros.nodes.convert import MessageError, PlaneFrame
 from tactile_dock_ros.nodes.params import Param
+
+# Seconds between two log lines of one cause of malformed input on one topic.
+MALFORMED_LOG_PERIOD_S = 10.0
 
 # The docking plane in the arm base frame (tf2 is not available everywhere; design.md).
 PLANE_FRAME_ID = Param("plane_frame_id", "dock_plane", "frame id stamped on plane-frame messages")
@@ -44,16 +50,60 @@ def stamp_seconds(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
-def guarded(node: Node, what: str, callback: Callable) -> Callable:
-    """Wrap a subscription callback: a MessageError is logged and the message dropped."""
+class MalformedLog:
+    """Counts dropped messages per topic and logs each cause (``validate.cause``) at most once
+    per ``period_s`` seconds, saying how many like it were dropped in between."""
 
-    def wrapped(msg) -> None:
+    def __init__(self, logger, period_s: float = MALFORMED_LOG_PERIOD_S, clock=time.monotonic):
+        self.logger, self.period_s, self.clock = logger, period_s, clock
+        self.dropped: Counter[str] = Counter()  # topic -> messages dropped
+        self._causes: dict[tuple[str, str], list] = {}  # (topic, cause) -> [next log, quiet]
+
+    def drop(self, topic: str, err: MessageError) -> None:
+        self.dropped[topic] += 1
+        key, now = (topic, validate.cause(err)), self.clock()
+        entry = self._causes.setdefault(key, [now, 0])
+        if now < entry[0]:
+            entry[1] += 1
+            return
+        more = f" ({entry[1]} more dropped for this cause since)" if entry[1] else ""
+        self.logger.error(f"dropped {topic} message: {err}{more}")
+        entry[:] = [now + self.period_s, 0]
+
+
+def subscribe(
+    node: Node,
+    msg_type,
+    topic: str,
+    callback: Callable,
+    profile,
+    frame_id=None,
+    callback_group=None,
+):
+    """``node.create_subscription`` behind the guard every subscription of the suite has: the
+    stamp (and the frame, when ``frame_id`` is given) is checked, then ``callback`` runs; a
+    :class:`MessageError` from either drops the message, counted and logged by
+    ``node.malformed`` under the resolved topic name; ``callback_group`` as rclpy's."""
+    if not hasattr(node, "malformed"):
+        node.malformed = MalformedLog(node.get_logger())
+    stamped = "header" in msg_type.get_fields_and_field_types()
+
+    def guarded(msg) -> None:
         try:
+            if stamped:
+                now_ns = node.get_clock().now().nanoseconds
+                validate.check_stamp(name, msg.header.stamp, now_ns)
+                if frame_id is not None:
+                    validate.check_frame(name, msg, frame_id)
             callback(msg)
         except MessageError as err:
-            node.get_logger().error(f"dropped malformed {what}: {err}")
+            node.malformed.drop(name, err)
 
-    return wrapped
+    subscription = node.create_subscription(
+        msg_type, topic, guarded, profile, callback_group=callback_group
+    )
+    name = subscription.topic_name
+    return subscription
 
 
 class Stopwatch:
@@ -84,8 +134,17 @@ def run(
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # SIGINT while rclpy converted a message surfaces as this (seen under fuzzing): the
+        # shutdown, once the signal has shut the context down; anything else is a fault.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
+            dropped = getattr(node, "malformed", None)
+            if dropped is not None and dropped.dropped:
+                counts = ", ".join(f"{t} {n}" for t, n in sorted(dropped.dropped.items()))
+                node.get_logger().info(f"malformed messages dropped: {counts}")
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()

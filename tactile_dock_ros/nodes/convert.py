@@ -3,7 +3,9 @@
 Every ``*_from_msg`` function validates what it reads (array sizes, finiteness, known status
 values, unit vectors) and raises :class:`MessageError` with a message saying which field is
 wrong; nodes log that message and drop the input, so a malformed message never reaches the
-core or a node's state. Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
+core or a node's state. The checks it shares with the subscription guard (``common.subscribe``:
+finiteness, size limits read from the length fields, stamps, frames) are in ``nodes.validate``.
+Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
 
 The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
 not available everywhere this runs, so the transform is a node parameter, see design.md).
@@ -37,6 +39,8 @@ from tactile_dock_ros.msg import (
     ShapeDistribution,
     ShapeSamples,
 )
+from tactile_dock_ros.nodes import validate
+from tactile_dock_ros.nodes.validate import MessageError, finite
 from tactile_dock_ros.perception import depth as depth_codec
 from tactile_dock_ros.perception.config import PerceptionError
 
@@ -44,20 +48,10 @@ from tactile_dock_ros.perception.config import PerceptionError
 UNIT_TOLERANCE = 1e-3
 
 
-class MessageError(ValueError):
-    """A message that cannot be converted; the text names the offending field."""
-
-
-def _finite(name: str, values) -> np.ndarray:
-    array = np.asarray(values, dtype=float)
-    if not np.all(np.isfinite(array)):
-        raise MessageError(f"{name} holds NaN or inf")
-    return array
-
-
-def _points(name: str, points) -> np.ndarray:
-    """(k, 2) plane coordinates of a Point list; z is ignored (the plane has z = 0)."""
-    return _finite(name, [(p.x, p.y) for p in points]).reshape(-1, 2)
+def _points(name: str, points, limit: int) -> np.ndarray:
+    """(k, 2) plane coordinates of a Point list of at most ``limit``; z is ignored (z = 0)."""
+    validate.bounded(f"{name} count", len(points), limit)
+    return finite(name, [(p.x, p.y) for p in points]).reshape(-1, 2)
 
 
 def _point(xy) -> Point:
@@ -105,32 +99,30 @@ class PlaneFrame:
         return np.asarray(v2, float) @ self.axes
 
 
-def check_frame(what: str, msg, frame_id: str) -> None:
-    """Reject a stamped message in another frame than ``frame_id`` (tf2 is not used here: the
-    publisher must express it there). An empty frame_id is taken to mean ``frame_id``."""
-    if msg.header.frame_id and msg.header.frame_id != frame_id:
-        raise MessageError(f"{what} is in frame {msg.header.frame_id!r}, expected {frame_id!r}")
-
-
 def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
-    """geometry_msgs/PoseStamped (base frame) -> tool position in the plane (2,) metres."""
+    """geometry_msgs/PoseStamped (base frame) -> tool position in the plane (2,) metres; the
+    orientation must be a unit quaternion even where it is not used."""
+    pose_rotation(msg)
     p = msg.pose.position
-    return plane.point_to_plane(_finite("pose.position", [p.x, p.y, p.z]))
+    return plane.point_to_plane(finite("pose.position", [p.x, p.y, p.z]))
 
 
 def pose_rotation(msg) -> np.ndarray:
     """geometry_msgs/PoseStamped -> (3, 3) rotation of the tool frame into the pose's frame."""
     q = msg.pose.orientation
-    xyzw = _finite("pose.orientation", [q.x, q.y, q.z, q.w])
+    xyzw = finite("pose.orientation", [q.x, q.y, q.z, q.w])
     if abs(np.linalg.norm(xyzw) - 1.0) > 1e-3:
         raise MessageError(f"pose.orientation must be a unit quaternion, got {xyzw.tolist()}")
     return Rotation.from_quat(xyzw).as_matrix()
 
 
 def wrench_force(msg) -> np.ndarray:
-    """geometry_msgs/WrenchStamped -> force (3,) newtons in the message's frame (no torque)."""
+    """geometry_msgs/WrenchStamped -> force (3,) newtons in the message's frame (the torque,
+    unused, must be finite too)."""
+    t = msg.wrench.torque
+    finite("wrench.torque", [t.x, t.y, t.z])
     f = msg.wrench.force
-    return _finite("wrench.force", [f.x, f.y, f.z])
+    return finite("wrench.force", [f.x, f.y, f.z])
 
 
 def pose_to_msg(position_3: np.ndarray, header: Header) -> PoseStamped:
@@ -154,9 +146,12 @@ def twist_to_msg(velocity_3: np.ndarray, header: Header) -> TwistStamped:
 
 
 def twist_velocity(msg, plane: PlaneFrame) -> np.ndarray:
-    """geometry_msgs/TwistStamped -> linear velocity in the plane (2,) m/s."""
+    """geometry_msgs/TwistStamped -> linear velocity in the plane (2,) m/s (the angular one,
+    unused, must be finite too)."""
+    w = msg.twist.angular
+    finite("twist.angular", [w.x, w.y, w.z])
     v = msg.twist.linear
-    return plane.vector_to_plane(_finite("twist.linear", [v.x, v.y, v.z]))
+    return plane.vector_to_plane(finite("twist.linear", [v.x, v.y, v.z]))
 
 
 def vector3(v) -> Vector3:
@@ -179,15 +174,16 @@ def shape_to_msg(shape: GaussianShape, header: Header) -> ShapeDistribution:
 
 
 def shape_from_msg(msg: ShapeDistribution) -> GaussianShape:
-    n, m = int(msg.num_vertices), int(msg.num_basis)
+    n = validate.bounded("num_vertices", msg.num_vertices, validate.MAX_VERTICES)
+    m = validate.bounded("num_basis", msg.num_basis, validate.MAX_BASIS)
     if n < 2:
         raise MessageError(f"num_vertices must be >= 2, got {n}")
     if len(msg.mean) != 2 * n:
         raise MessageError(f"mean has {len(msg.mean)} values, expected 2*num_vertices = {2 * n}")
     if len(msg.basis) != 2 * n * m:
         raise MessageError(f"basis has {len(msg.basis)} values, expected 2n*m = {2 * n * m}")
-    mean = _finite("mean", msg.mean)
-    basis = _finite("basis", msg.basis).reshape(2 * n, m)
+    mean = finite("mean", msg.mean)
+    basis = finite("basis", msg.basis).reshape(2 * n, m)
     try:
         return GaussianShape(mean, basis, closed=bool(msg.closed), friction=float(msg.friction))
     except ValueError as err:
@@ -208,8 +204,8 @@ def segments_to_msgs(history: History, header: Header, plan_ids=0) -> list[Conta
 
 def history_from_segments(segments) -> History:
     """ContactSegment[] -> History; unknown status, NaN or zero-length contact -> MessageError."""
-    a = _points("segment start", [s.start for s in segments])
-    b = _points("segment end", [s.end for s in segments])
+    a = _points("segment start", [s.start for s in segments], validate.MAX_SEGMENTS)
+    b = _points("segment end", [s.end for s in segments], validate.MAX_SEGMENTS)
     try:
         return History(a, b, np.array([s.status for s in segments], dtype=int))
     except ValueError as err:
@@ -257,14 +253,19 @@ def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
     An empty set (num_samples = 0, no samples) is how inference says that no shape is consistent
     with the history; callers check ``msg.num_samples == 0`` before converting.
     """
-    n, count = int(msg.num_vertices), int(msg.num_samples)
+    n = validate.bounded("num_vertices", msg.num_vertices, validate.MAX_VERTICES)
+    count = validate.bounded("num_samples", msg.num_samples, validate.MAX_SAMPLES)
     if n < 2 or count < 1:
         raise MessageError(f"need num_vertices >= 2 and num_samples >= 1, got {n}, {count}")
     if len(msg.samples) != count * 2 * n:
         raise MessageError(
             f"samples has {len(msg.samples)} values, expected num_samples*2n = {count * 2 * n}"
         )
-    return _finite("samples", msg.samples).reshape(count, n, 2)
+    history_length = validate.bounded("history_length", msg.history_length, validate.MAX_SEGMENTS)
+    validate.bounded("dropped_segments count", len(msg.dropped_segments), history_length)
+    if len(msg.dropped_segments) and max(msg.dropped_segments) >= history_length:
+        raise MessageError(f"dropped_segments index beyond history_length {history_length}")
+    return finite("samples", msg.samples).reshape(count, n, 2)
 
 
 # --------------------------------------------------------------------------- plans
@@ -317,9 +318,9 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
     if msg.decision not in (DockingPlan.DOCK, DockingPlan.GIVE_UP):
         raise MessageError(f"unknown decision {msg.decision}")
     dock = msg.decision == DockingPlan.DOCK
-    waypoints = _points("waypoints", msg.waypoints)
-    load = _finite("load_direction", [msg.load_direction.x, msg.load_direction.y])
-    scalars = _finite(
+    waypoints = _points("waypoints", msg.waypoints, validate.MAX_WAYPOINTS)
+    load = finite("load_direction", [msg.load_direction.x, msg.load_direction.y])
+    scalars = finite(
         "thresholds", [msg.contact_force_threshold, msg.max_speed, msg.docking_probability]
     )
     if dock:
@@ -406,11 +407,14 @@ def report_to_msg(report: Report, header: Header) -> ExecutionReport:
 def report_from_msg(msg: ExecutionReport) -> Report:
     if msg.outcome not in OUTCOME_NAMES:
         raise MessageError(f"unknown outcome {msg.outcome}")
+    history = history_from_segments(msg.segments)
+    if any(s.plan_id != msg.plan_id for s in msg.segments):
+        raise MessageError(f"segments of plan {msg.plan_id}'s report carry another plan_id")
     return Report(
         plan_id=int(msg.plan_id),
         outcome=int(msg.outcome),
-        history=history_from_segments(msg.segments),
-        stop_point=_points("stop_point", [msg.stop_point])[0],
+        history=history,
+        stop_point=_points("stop_point", [msg.stop_point], 1)[0],
         detail=msg.detail,
         episode=int(msg.episode),
     )
@@ -420,12 +424,35 @@ def status_name(status: int) -> str:
     return Status(status).name
 
 
+# --------------------------------------------------------------------------- episodes
+
+
+def episode_from_msg(msg) -> int:
+    """std_msgs/UInt32 on ``episode`` -> the episode id; 0 means "no episode" and is never sent."""
+    if msg.data == 0:
+        raise MessageError("episode id 0 is reserved (no episode)")
+    return int(msg.data)
+
+
+def episode_status_from_msg(msg) -> tuple[str, int]:
+    """The planner's episode_status (DiagnosticStatus) -> (state, episode id); the state is the
+    message up to the first ':', the id the ``episode`` value (0 when absent)."""
+    value = next((kv.value for kv in msg.values if kv.key == "episode"), "0")
+    if not value.isdecimal() or int(value) >= 2**32:
+        raise MessageError(f"episode_status episode {value!r} is not a uint32")
+    return msg.message.split(":")[0], int(value)
+
+
 # --------------------------------------------------------------------------- depth camera
 
 
 def depth_from_image(msg: Image) -> np.ndarray:
     """sensor_msgs/Image (16UC1 mm or 32FC1 m; step, byte order honoured) -> (h, w) metres,
     NaN where there is no return (``perception.depth.decode_depth``)."""
+    validate.bounded("depth image width*height", msg.width * msg.height, validate.MAX_PIXELS)
+    if len(msg.data) != msg.step * msg.height:
+        raise MessageError(f"depth image data has {len(msg.data)} bytes, step*height is "
+                           f"{msg.step * msg.height}")  # fmt: skip
     try:
         return depth_codec.decode_depth(
             msg.data, msg.height, msg.width, msg.encoding, msg.is_bigendian, msg.step
@@ -434,8 +461,17 @@ def depth_from_image(msg: Image) -> np.ndarray:
         raise MessageError(f"depth image: {err}") from err
 
 
-def intrinsics_from_camera_info(info: CameraInfo, image: Image) -> np.ndarray:
-    """CameraInfo K (3, 3), checked against the image size; distortion is not used."""
+def intrinsics_from_camera_info(info: CameraInfo, image: Image | None = None) -> np.ndarray:
+    """CameraInfo K (3, 3), checked against ``image``'s size and frame (default: the info's
+    own, which checks K alone); distortion is not used."""
+    image = info if image is None else image
+    if not 0 < info.width * info.height <= validate.MAX_PIXELS:
+        raise MessageError(f"camera info size {info.width}x{info.height} is out of range")
+    if info.header.frame_id != image.header.frame_id:
+        raise MessageError(
+            f"camera info of frame {info.header.frame_id!r} for an image of "
+            f"{image.header.frame_id!r}"
+        )
     try:
         return depth_codec.check_intrinsics(
             info.k, image.height, image.width, info.height, info.width

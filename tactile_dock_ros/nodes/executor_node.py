@@ -25,11 +25,11 @@ from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
-    guarded,
     header,
     now_seconds,
     plane_frame,
     run,
+    subscribe,
 )
 from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
@@ -114,33 +114,26 @@ class ExecutorNode(Node):
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
         self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
+        self.episode_state = None  # (state, episode) of the planner's latest episode_status
+        self.last_plan = (0, 0)  # (episode, plan_id) of the newest plan accepted
         self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the run plan
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
-        self.create_subscription(
-            DockingPlan, "plan", guarded(self, "plan", self.on_plan), qos.EVENTS
-        )
-        self.create_subscription(
-            PoseStamped, "tool_pose", guarded(self, "tool pose", self.on_pose), qos.SENSOR
-        )
-        self.create_subscription(
-            WrenchStamped, "wrench", guarded(self, "wrench", self.on_wrench), qos.SENSOR
-        )
-        self.create_subscription(
-            DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED
-        )
+        plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
+        wrench_id = base_id if self.p.wrench_frame == "base" else None  # else the sensor's frame
+        subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id)
+        subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id)
+        subscribe(self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id)
+        subscribe(self, DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED)
         self.create_timer(self.dt, self.on_tick)
 
     def on_pose(self, msg: PoseStamped) -> None:
-        convert.check_frame("tool pose", msg, self.p.base_frame_id)
         self.tool = convert.pose_position(msg, self.plane)
         self.tool_rotation = convert.pose_rotation(msg)
         self.pose_time = now_seconds(self)
 
     def on_wrench(self, msg: WrenchStamped) -> None:
         """Filter the force in the frame it comes in (the sensor bias is constant there)."""
-        if self.p.wrench_frame == "base":
-            convert.check_frame("wrench", msg, self.p.base_frame_id)
         force = convert.wrench_force(msg)
         self.wrench_time = now_seconds(self)
         self.filter.add(self.wrench_time, force)
@@ -152,13 +145,14 @@ class ExecutorNode(Node):
         return self.filter.value
 
     def on_plan(self, msg: DockingPlan) -> None:
+        plan = convert.plan_from_msg(msg)  # first: a malformed copy must not mark a plan seen
         key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
         if key in self.seen_plans:  # the planner resends a plan until its report arrives
             if key == self.plan_heard[0]:
                 self.plan_heard = (key, now_seconds(self))
             return
+        self.check_order(plan)
         self.seen_plans.add(key)
-        plan = convert.plan_from_msg(msg)
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
@@ -171,10 +165,23 @@ class ExecutorNode(Node):
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )
 
+    def check_order(self, plan) -> None:
+        """Once the planner's episode_status is known, only plans of its RUNNING episode run,
+        each plan after the last one (a late or replayed plan is dropped, no report)."""
+        if self.episode_state not in (None, ("RUNNING", plan.episode)):
+            raise convert.MessageError(
+                f"plan {plan.plan_id} of episode {plan.episode}, but the planner's episode "
+                f"{self.episode_state[1]} is {self.episode_state[0]}"
+            )
+        if self.last_plan[0] == plan.episode and plan.plan_id <= self.last_plan[1]:
+            raise convert.MessageError(
+                f"plan {plan.plan_id} of episode {plan.episode} after its plan {self.last_plan[1]}"
+            )
+        self.last_plan = (plan.episode, plan.plan_id)
+
     def on_episode_status(self, msg: DiagnosticStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
-        state = msg.message.split(":")[0]
-        episode = int({kv.key: kv.value for kv in msg.values}.get("episode", "0"))
+        state, episode = self.episode_state = convert.episode_status_from_msg(msg)
         plan = self.run.plan if self.run else self.pending[0] if self.pending else None
         if plan is None or (plan.episode == episode and state == "RUNNING"):
             return

@@ -36,10 +36,11 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 from tactile_dock_ros.nodes import convert, journal, markers, qos
-from tactile_dock_ros.nodes.common import guarded, header, run
+from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
+    PLANE_FRAME_ID,
     Param("method", "hmc", "posterior sampler", choices=("hmc", "gibbs", "mh", "rejection")),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
@@ -60,11 +61,12 @@ class InferenceNode(Node):
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
         self.last_z = None  # (N, m) previous posterior in z, for the sampler's warm start
-        self.frame_id = "dock_plane"
+        self.frame_id = self.p.plane_frame_id
         self.history = History()
         self.plan_ids = np.zeros(0, int)
         self.handled_plans: set[int] = set()
         self.episode = 0
+        self.past_episodes: set[int] = set()  # ids that ended here: a late copy is no new one
         self.stash: deque = deque(maxlen=STASHED_REPORTS)
         self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
         self.generation = 0  # counts state changes; the sampler publishes only current results
@@ -74,28 +76,32 @@ class InferenceNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
         inputs = MutuallyExclusiveCallbackGroup()
         self.sampler = self.create_guard_condition(self.sample, MutuallyExclusiveCallbackGroup())
+        frame = self.frame_id
         subscriptions = [
-            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED),
-            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS),
-            (UInt32, "episode", self.on_episode, qos.LATCHED),
+            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, frame),
+            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, frame),
+            (UInt32, "episode", self.on_episode, qos.LATCHED, None),
         ]
-        for msg_type, topic, callback, profile in subscriptions:
-            callback = guarded(self, topic, callback)
-            self.create_subscription(msg_type, topic, callback, profile, callback_group=inputs)
+        for msg_type, topic, callback, profile, frame_id in subscriptions:
+            subscribe(self, msg_type, topic, callback, profile, frame_id, callback_group=inputs)
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         prior = convert.shape_from_msg(msg)
         with self.lock:
             self.prior, self.last_z = prior, None
-            self.frame_id = msg.header.frame_id or self.frame_id
         self.get_logger().info(f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns")
         self.changed()
 
     def on_episode(self, msg: UInt32) -> None:
-        if msg.data == self.episode:
+        episode = convert.episode_from_msg(msg)
+        if episode == self.episode:
+            return
+        if episode in self.past_episodes:
+            self.get_logger().warning(f"episode {episode} is over: ignored (late or resent)")
             return
         with self.lock:
-            self.episode = msg.data
+            self.past_episodes.add(self.episode)
+            self.episode = episode
             self.history, self.plan_ids = History(), np.zeros(0, int)
             self.last_z = None
             self.handled_plans.clear()
@@ -147,8 +153,8 @@ class InferenceNode(Node):
     def apply(self, report: convert.Report) -> bool:
         """Add a report of the current episode to the history (journaled first); False for a
         duplicate (the executor's reports are latched: a restart receives them again)."""
-        if report.plan_id in self.handled_plans:
-            self.get_logger().info(f"plan {report.plan_id}: duplicate report ignored")
+        if report.plan_id <= max(self.handled_plans, default=0):  # plans run one at a time
+            self.get_logger().info(f"plan {report.plan_id}: duplicate or late report ignored")
             return False
         new = report.history
         if self.journal is not None:

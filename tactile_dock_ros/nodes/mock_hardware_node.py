@@ -29,11 +29,11 @@ from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
-    guarded,
     header,
     now_seconds,
     plane_frame,
     run,
+    subscribe,
 )
 from tactile_dock_ros.nodes.mock_physics import PointToolSim
 from tactile_dock_ros.nodes.params import Param, declare
@@ -110,9 +110,8 @@ class MockHardwareNode(Node):
         truth_pub = self.create_publisher(ShapeDistribution, "~/ground_truth", qos.LATCHED)
         truth = GaussianShape(vertices.ravel(), np.zeros((vertices.size, 0)), closed, friction)
         truth_pub.publish(convert.shape_to_msg(truth, header(self, self.p.plane_frame_id)))
-        self.create_subscription(
-            TwistStamped, "cmd_twist", guarded(self, "command", self.on_command), qos.COMMAND
-        )
+        base_id = self.p.base_frame_id
+        subscribe(self, TwistStamped, "cmd_twist", self.on_command, qos.COMMAND, base_id)
         self.create_timer(self.dt, self.on_tick)
         if self.p.perception_config:
             self.start_camera(vertices)

@@ -24,7 +24,7 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, markers, qos
-from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, Stopwatch, guarded, header, run
+from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, Stopwatch, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.terrain_prior import perceive
@@ -46,6 +46,11 @@ PARAMS = [
         choices=("first_frame", "on_request"),
     ),
     Param("seed", 0, "seed of the occlusion sampler", "", 0, 2**31 - 1),
+    Param(
+        "camera_frame_id",
+        "",
+        "frame of the depth image and camera info ('': any, the two must agree)",
+    ),
 ]
 
 
@@ -71,12 +76,9 @@ class PerceptionNode(Node):
             self.config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
-        self.create_subscription(
-            CameraInfo, "depth/camera_info", lambda m: setattr(self, "info", m), qos.SENSOR
-        )
-        self.create_subscription(
-            Image, "depth/image", guarded(self, "image", self.on_image), qos.SENSOR
-        )
+        camera = self.p.camera_frame_id or None
+        subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
+        subscribe(self, Image, "depth/image", self.on_image, qos.SENSOR, camera)
 
     def on_capture(self, request, response):
         if self.p.prior_source == "problem":
@@ -87,11 +89,18 @@ class PerceptionNode(Node):
             response.success, response.message = True, "the next valid depth frame is used"
         return response
 
+    def on_info(self, msg: CameraInfo) -> None:
+        convert.intrinsics_from_camera_info(msg)  # K alone; the image size is checked with it
+        self.info = msg
+
     def on_image(self, msg: Image) -> None:
-        if not self.pending or self.info is None:
+        """Every frame is checked (a bad camera is reported while idle too); used when pending."""
+        depth = convert.depth_from_image(msg)
+        if self.info is None:
             return
         K = convert.intrinsics_from_camera_info(self.info, msg)
-        depth = convert.depth_from_image(msg)
+        if not self.pending:
+            return
         with Stopwatch() as watch:
             try:
                 result = perceive(depth, K, self.config, self.rng)

@@ -49,12 +49,12 @@ from tactile_dock_ros.nodes import convert, journal, qos
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
     Stopwatch,
-    guarded,
     header,
     now_seconds,
     plane_frame,
     run,
     stamp_seconds,
+    subscribe,
 )
 from tactile_dock_ros.nodes.params import Param, declare
 
@@ -106,15 +106,16 @@ class PlannerNode(Node):
         self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, "episode_status", qos.LATCHED)
+        plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
         subscriptions = [
-            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED),
-            (ContactHistory, "contact_history", self.on_history, qos.LATCHED),
-            (ShapeSamples, "shape_samples", self.on_samples, qos.LATCHED),
-            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS),
-            (PoseStamped, "tool_pose", self.on_pose, qos.SENSOR),
+            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, plane_id),
+            (ContactHistory, "contact_history", self.on_history, qos.LATCHED, plane_id),
+            (ShapeSamples, "shape_samples", self.on_samples, qos.LATCHED, plane_id),
+            (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, plane_id),
+            (PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id),
         ]
-        for msg_type, topic, callback, profile in subscriptions:
-            self.create_subscription(msg_type, topic, guarded(self, topic, callback), profile)
+        for subscription in subscriptions:
+            subscribe(self, *subscription)
         self.create_service(Trigger, "start_episode", self.on_start)
         self.create_timer(RESEND_PERIOD / 2, self.on_timer)
         self.last_plan = None  # (msg, node-clock seconds when last sent)
@@ -131,7 +132,6 @@ class PlannerNode(Node):
             self.publish_status()  # tells clients that start_episode will be accepted
 
     def on_pose(self, msg: PoseStamped) -> None:
-        convert.check_frame("tool pose", msg, self.p.base_frame_id)
         self.tool = convert.pose_position(msg, self.plane)
         self.maybe_plan()
 

@@ -2,10 +2,10 @@
 
     python -m tactile_dock_ros.tools.bench SUITE [--json OUT] [--repeats R] [--seed S] [...]
 
-Each suite is a module ``tactile_dock_ros.tools.bench_<suite>`` with ``add_arguments(parser)``
-and ``run(args) -> dict``; ``run`` prints a human-readable table as it goes and returns the
-JSON-serializable results, which are written to ``--json`` (and always include the command
-line, the machine and the software versions). BLAS runs single-threaded unless
+Each suite is a module ``tactile_dock_ros.tools.bench_<suite>`` (or as ``MODULES`` says) with
+``add_arguments(parser)`` and ``run(args) -> dict``; ``run`` prints a human-readable table as
+it goes and returns the JSON-serializable results, which are written to ``--json`` (and always
+include the command line, the machine and the software versions). BLAS runs single-threaded unless
 OPENBLAS_NUM_THREADS is set.
 """
 
@@ -29,10 +29,13 @@ SUITES = {
     # suite name -> one-line description
     "docking": "Fig. 13: ours vs growing window vs info gain, cycles and success per problem",
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
+    "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
 }
+
+MODULES = {"fuzz": "tactile_dock_ros.tools.fuzz"}  # suites not named bench_<suite>
 
 
 def _environment() -> dict:
@@ -56,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="suite", required=True, metavar="SUITE")
     modules = {}
     for name, help_text in SUITES.items():
-        module = importlib.import_module(f"tactile_dock_ros.tools.bench_{name}")
+        module = importlib.import_module(MODULES.get(name, f"tactile_dock_ros.tools.bench_{name}"))
         suite_parser = sub.add_parser(name, help=help_text, description=module.__doc__)
         suite_parser.add_argument("--json", type=Path, help="write the results to this file")
         suite_parser.add_argument("--repeats", type=int, default=3, help="repetitions (median)")
