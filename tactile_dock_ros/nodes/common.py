@@ -14,7 +14,7 @@ from std_msgs.msg import Header
 from tactile_dock_ros.nodes.convert import MessageError, PlaneFrame
 from tactile_dock_ros.nodes.params import Param
 
-# The docking plane in the arm base frame (tf2 is not available everywhere; design.md).
+# The docking plane in the arm base frame (tf2 is not used; docs/nodes.md, "Running it").
 PLANE_FRAME_ID = Param("plane_frame_id", "dock_plane", "frame id stamped on plane-frame messages")
 PLANE_TABLE = [
     PLANE_FRAME_ID,

@@ -6,7 +6,7 @@ wrong; nodes log that message and drop the input, so a malformed message never r
 core or a node's state. Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
 
 The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
-not available everywhere this runs, so the transform is a node parameter, see design.md).
+not used, so the transform is a node parameter: docs/nodes.md, "Running it").
 """
 
 from __future__ import annotations
