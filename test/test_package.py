@@ -173,6 +173,15 @@ def test_setup_py_requires_only_imported_distributions():
     assert not unused, f"setup.py requires distributions nothing imports: {unused}"
 
 
+def test_jazzy_and_kilted_pin_the_same_non_ros_packages():
+    """`make test ROS_DISTRO=jazzy` differs from the default only in its ROS wheels."""
+    kilted, jazzy = _pins("requirements.txt"), _pins("requirements-jazzy.txt")
+    non_ros = {n: v for n, v in kilted.items() if not n.startswith("ros-")}
+    assert {n: v for n, v in jazzy.items() if not n.startswith("ros-")} == non_ros
+    assert {"ros-jazzy-rclpy", "ros-rclpy", "pytest"} <= jazzy.keys()
+    assert not any(n.startswith("ros-jazzy-") for n in kilted)
+
+
 @pytest.mark.parametrize("name", ["requirements.txt", "requirements-jazzy.txt"])
 def test_every_pin_is_needed(name):
     """Each pin is imported by the package or its tests, a tool in TOOLS, a ROS wheel, or a
