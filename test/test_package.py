@@ -182,6 +182,29 @@ def test_jazzy_and_kilted_pin_the_same_non_ros_packages():
     assert not any(n.startswith("ros-jazzy-") for n in kilted)
 
 
+@pytest.mark.parametrize("distro", ["kilted", "jazzy"])
+def test_make_builds_each_distro_in_its_own_venv(distro, tmp_path):
+    """`make test ROS_DISTRO=jazzy`: its own venv, pins and message build (dry run)."""
+    venv = tmp_path / "venv"
+    run = subprocess.run(
+        ["make", "-n", "setup", f"ROS_DISTRO={distro}", f"VENV={venv}"],
+        cwd=REPO_ROOT, capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    requirements = {"kilted": "requirements.txt", "jazzy": "requirements-jazzy.txt"}[distro]
+    assert f"{venv}/bin/python -m pip install" in run.stdout
+    assert f"-r {requirements}" in run.stdout
+    assert f"-B build/{distro}" in run.stdout
+
+
+def test_make_refuses_a_distro_without_pypi_wheels():
+    run = subprocess.run(
+        ["make", "-n", "setup", "ROS_DISTRO=humble"], cwd=REPO_ROOT, capture_output=True, text=True
+    )
+    assert run.returncode != 0
+    assert "ROS_DISTRO=humble" in run.stderr and "jazzy" in run.stderr
+
+
 @pytest.mark.parametrize("name", ["requirements.txt", "requirements-jazzy.txt"])
 def test_every_pin_is_needed(name):
     """Each pin is imported by the package or its tests, a tool in TOOLS, a ROS wheel, or a
