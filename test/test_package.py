@@ -1,5 +1,6 @@
 """Package metadata and code hygiene: package.xml declares exactly what the package uses, with
-keys rosdep can resolve, and the pinned pytest loads the launch_testing plugin."""
+keys rosdep can resolve; every pin is needed; `make` builds Kilted and Jazzy apart; the pinned
+pytest loads launch_testing's plugin; ruff is clean."""
 
 import ast
 import importlib.metadata as metadata
@@ -57,11 +58,13 @@ OTHER_USES = {
     "launch_testing_ament_cmake": ("test_depends", "CMakeLists.txt", r"add_launch_test\("),
     "python3-ruff-pip": ("test_depends", "test/test_package.py", r'"-m", "ruff"\]'),
 }
-# Every key package.xml may use. System keys: each checked by name in ros/rosdistro's
-# rosdep/base.yaml or rosdep/python.yaml (python3-rosbags-pip: rosdistro PR 37795,
-# python3-ruff-pip: PR 39543; there is none for open3d or tmg-hmc). ROS keys: packages released in
-# Humble, Jazzy and Kilted. `rosdep` itself cannot run here (its database is fetched from GitHub):
-# test_rosdep_resolves_every_key runs it where it is initialized.
+# Every key package.xml may use. System keys of ros/rosdistro's rosdep/*.yaml, checked by name:
+# merged rosdistro PRs added python3-rosbags-pip (37795), python3-ruff-pip (39543),
+# python3-hypothesis (23334), python3-shapely (25369), python3-packaging (23363),
+# python3-catkin-pkg (18093), python3-yaml (15377); numpy, scipy, matplotlib, opencv and pytest are
+# keys of ROS 2's own packages. There is none for open3d or tmg-hmc. ROS keys: packages released in
+# Humble, Jazzy and Kilted. `rosdep` cannot run here (`rosdep init` fetches its sources list from
+# GitHub): test_rosdep_resolves_every_key runs it where it is initialized.
 SYSTEM_KEYS = {
     "python3-numpy", "python3-scipy", "python3-shapely", "python3-yaml", "python3-matplotlib",
     "python3-opencv", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
