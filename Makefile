@@ -1,11 +1,23 @@
 # Two commands do all setup on a fresh machine:
-#   make test   venv + pinned wheels + Debian packages + message build, then pytest
+#   make test   venv + pinned wheels + message build, then pytest
 #   make demo   the same setup, then one docking episode on the mock profile (episode.png)
 # Every step is stamped, so a second run with nothing changed goes straight to pytest.
+# ROS_DISTRO selects the ROS 2 wheels from PyPI: kilted (default, what CI runs) or jazzy
+# (`make test ROS_DISTRO=jazzy`), each in its own venv with its own pinned requirements.
+
+ROS_DISTRO ?= kilted
+ifeq ($(ROS_DISTRO),kilted)
+VENV         ?= .venv
+REQUIREMENTS := requirements.txt
+else ifeq ($(ROS_DISTRO),jazzy)
+VENV         ?= .venv-jazzy
+REQUIREMENTS := requirements-jazzy.txt
+else
+$(error ROS_DISTRO=$(ROS_DISTRO): PyPI has ROS 2 wheels for kilted (default) and jazzy only)
+endif
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
-VENV   ?= .venv
-BUILD  ?= build/cmake
+BUILD  ?= build/$(ROS_DISTRO)
 PY      = $(VENV)/bin/python
 STAMPS  = $(VENV)/.stamps
 PYTEST_ARGS ?=
@@ -34,23 +46,13 @@ format: $(STAMPS)/venv
 	$(VENV)/bin/ruff format . && $(VENV)/bin/ruff check --fix .
 
 $(STAMPS)/python:
-	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ROS 2 Kilted wheels are cp311), found " + sys.version' \
+	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ROS 2 wheels on PyPI are cp311), found " + sys.version' \
 	  || { echo "set PYTHON=/path/to/python3.11"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	@mkdir -p $(STAMPS) && touch $@
 
-# Debian packages the wheels need at run time: open3d dlopens libusb-1.0.
-$(STAMPS)/debian: | $(STAMPS)/python
-	@if ldconfig -p | grep -q 'libusb-1.0.so.0'; then echo "libusb-1.0 present"; \
-	elif command -v apt-get >/dev/null; then \
-	  echo "installing Debian package libusb-1.0-0 (needed by open3d)"; \
-	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
-	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null; \
-	else echo "libusb-1.0 is missing and apt-get is not available: install libusb-1.0 by hand"; exit 1; fi
-	@touch $@
-
-$(STAMPS)/venv: requirements.txt $(STAMPS)/debian
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+$(STAMPS)/venv: $(REQUIREMENTS) | $(STAMPS)/python
+	$(PY) -m pip install --quiet --disable-pip-version-check -r $(REQUIREMENTS)
 	@touch $@
 
 # The messages are built with the very same CMake project `colcon build` uses, installed into

@@ -23,7 +23,7 @@ setup(
     ],
     install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0", "pyyaml>=6.0"],
     extras_require={
-        "perception": ["opencv-contrib-python-headless>=4.9", "open3d-cpu>=0.19"],
+        "perception": ["opencv-contrib-python-headless>=4.9"],
         "plot": ["matplotlib>=3.8"],
         "bench": ["tmg-hmc>=1.0.4"],
     },

@@ -73,3 +73,16 @@ def test_parameters_are_read_only_at_run_time(tmp_path):
     with node_from_launch(launch_nodes("mock")["executor"], tmp_path) as (node, _):
         result = node.set_parameters([Parameter("max_force", value=5.0)])[0]
         assert not result.successful and node.get_parameter("max_force").value == 40.0
+
+
+def test_executor_defaults_are_the_guarded_settings_defaults():
+    """One source: a node started without a config file executes like guarded.Settings()."""
+    from dataclasses import fields
+
+    from tactile_dock_ros.nodes.executor_node import PARAMS
+    from tactile_dock_ros.nodes.guarded import Settings
+
+    node_defaults = {p.name: p.default for p in PARAMS}
+    shared = [f.name for f in fields(Settings) if f.name in node_defaults]
+    assert "slip_tolerance" in shared and len(shared) >= 9
+    assert {n: node_defaults[n] for n in shared} == {n: getattr(Settings(), n) for n in shared}

@@ -20,7 +20,7 @@ from tactile_dock_ros.nodes.params import Param
 # Seconds between two log lines of one cause of malformed input on one topic.
 MALFORMED_LOG_PERIOD_S = 10.0
 
-# The docking plane in the arm base frame (tf2 is not available everywhere; design.md).
+# The docking plane in the arm base frame (tf2 is not used; docs/nodes.md, "Running it").
 PLANE_FRAME_ID = Param("plane_frame_id", "dock_plane", "frame id stamped on plane-frame messages")
 PLANE_TABLE = [
     PLANE_FRAME_ID,

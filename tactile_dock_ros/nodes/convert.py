@@ -8,7 +8,7 @@ finiteness, size limits read from the length fields, stamps, frames) are in ``no
 Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
 
 The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
-not available everywhere this runs, so the transform is a node parameter, see design.md).
+not used, so the transform is a node parameter: docs/nodes.md, "Running it").
 """
 
 from __future__ import annotations

@@ -34,6 +34,12 @@ from tactile_dock_ros.nodes.common import (
 from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
 
+
+def _tuning(name: str, *spec) -> Param:
+    """A guarded-move setting whose default is guarded.Settings' (one source for both)."""
+    return Param(name, getattr(Settings, name), *spec)
+
+
 PARAMS = [
     *PLANE_TABLE,
     Param("control_rate_hz", 100.0, "guarded-move control rate", "Hz", 1.0, 1000.0),
@@ -50,17 +56,15 @@ PARAMS = [
     ),
     Param("workspace_min", [-1.0, -1.0], "workspace box lower corner (plane x, y)", "m", length=2),
     Param("workspace_max", [1.0, 1.0], "workspace box upper corner (plane x, y)", "m", length=2),
-    Param("contact_resolution", 0.01, "length of reported contact segments", "m", 1e-4, 0.1),
-    Param("waypoint_tolerance", 0.002, "a waypoint counts as reached within this", "m", 1e-5, 0.05),
-    Param("slip_tolerance", 0.001, "displacement under load that counts as slip", "m", 1e-5, 0.05),
-    Param("load_speed", 0.02, "pushing speed of the stick/slip test", "m/s", 1e-4, 1.0),
-    Param("load_force", 12.0, "loading test pushes up to this force", "N", 0.1, 500.0),
-    Param("retreat_distance", 0.02, "back-off after a failed contact", "m", 0.0, 0.2),
-    Param(
-        "settle_time", 0.3, "compliant slide: held this still under load = stuck", "s", 0.0, 10.0
-    ),
-    Param("max_slide", 0.3, "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
-    Param("approach_gain", 4.0, "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
+    _tuning("contact_resolution", "length of reported contact segments", "m", 1e-4, 0.1),
+    _tuning("waypoint_tolerance", "a waypoint counts as reached within this", "m", 1e-5, 0.05),
+    _tuning("slip_tolerance", "displacement under load that counts as slip", "m", 1e-5, 0.05),
+    _tuning("load_speed", "pushing speed of the stick/slip test", "m/s", 1e-4, 1.0),
+    _tuning("load_force", "loading test pushes up to this force", "N", 0.1, 500.0),
+    _tuning("retreat_distance", "back-off after a failed contact", "m", 0.0, 0.2),
+    _tuning("settle_time", "compliant slide: held this still under load = stuck", "s", 0.0, 10.0),
+    _tuning("max_slide", "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
+    _tuning("approach_gain", "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
     Param(
         "wrench_frame",
         "base",

@@ -1,4 +1,4 @@
-"""mock_hardware: simulated arm + F/T sensor on a ground-truth terrain (design.md).
+"""mock_hardware: simulated arm + F/T sensor on a ground-truth terrain (docs/nodes.md).
 
 Integrates ``cmd_twist`` (TwistStamped, base frame; a command older than ``command_timeout``
 counts as zero) for a point tool against the terrain with ``nodes.mock_physics`` at ``rate_hz``
