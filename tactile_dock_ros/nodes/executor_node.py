@@ -4,16 +4,19 @@ Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wr
 (WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
 planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
-``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends. Messages in
-an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
+``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends, and
+``/diagnostics`` (DiagnosticArray, every ``diagnostics_period``: ``nodes.diagnostics``). Messages
+in an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
 safety checks (the force limit on the whole 3-D force, out-of-plane pushes included) are in
-``nodes.guarded``; this file is the ROS glue.
+``nodes.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
+this file is the ROS glue. An ABORTED report carries no segments: what an aborted attempt felt
+is not evidence (a stale sensor or a stopped plan may have misread it).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 
@@ -28,8 +31,10 @@ from tactile_dock_ros.nodes.common import (
     plane_frame,
     run,
 )
+from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
 from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
+from tactile_dock_ros.nodes.watchdog import Admission, EpisodeGate
 
 PARAMS = [
     *PLANE_TABLE,
@@ -67,6 +72,7 @@ PARAMS = [
     ),
     Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
+    Param("diagnostics_period", 1.0, "period of the /diagnostics status", "s", 0.05, 60.0),
 ]
 
 
@@ -99,12 +105,14 @@ class ExecutorNode(Node):
         self.dt = 1.0 / self.p.control_rate_hz
         self.tool: np.ndarray | None = None
         self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
-        self.pose_time = self.wrench_time = None
+        self.health = ExecutorHealth(self.p.sensor_timeout, self.dt)
+        self.gate = EpisodeGate()
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
         self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.EVENTS)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", qos.EVENTS)
         self.create_subscription(
             DockingPlan, "plan", guarded(self, "plan", self.on_plan), qos.EVENTS
         )
@@ -118,20 +126,22 @@ class ExecutorNode(Node):
             DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED
         )
         self.create_timer(self.dt, self.on_tick)
+        self.create_timer(self.p.diagnostics_period, self.publish_diagnostics)
 
     def on_pose(self, msg: PoseStamped) -> None:
         convert.check_frame("tool pose", msg, self.p.base_frame_id)
         self.tool = convert.pose_position(msg, self.plane)
         self.tool_rotation = convert.pose_rotation(msg)
-        self.pose_time = now_seconds(self)
+        self.health.streams["tool_pose"].add(now_seconds(self))
 
     def on_wrench(self, msg: WrenchStamped) -> None:
         """Filter the force in the frame it comes in (the sensor bias is constant there)."""
         if self.p.wrench_frame == "base":
             convert.check_frame("wrench", msg, self.p.base_frame_id)
         force = convert.wrench_force(msg)
-        self.wrench_time = now_seconds(self)
-        self.filter.add(self.wrench_time, force)
+        now = now_seconds(self)
+        self.health.streams["wrench"].add(now)
+        self.filter.add(now, force)
 
     def base_force(self) -> np.ndarray:
         """Bias-free filtered force (3,) newtons in the base frame."""
@@ -151,6 +161,10 @@ class ExecutorNode(Node):
         if self.run is not None or self.pending is not None:
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
             return
+        admission, why = self.gate.admit(plan.episode)
+        if admission is Admission.REFUSE:
+            self.report(plan, Outcome.ABORTED, f"refused: {why}")
+            return
         self.pending = (plan, now_seconds(self))
         self.get_logger().info(
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
@@ -160,6 +174,7 @@ class ExecutorNode(Node):
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state = msg.message.split(":")[0]
         episode = int({kv.key: kv.value for kv in msg.values}.get("episode", "0"))
+        self.gate.update(episode, state)
         plan = self.run.plan if self.run else self.pending[0] if self.pending else None
         if plan is None or (plan.episode == episode and state == "RUNNING"):
             return
@@ -172,15 +187,23 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"stopped before starting: {why}")
 
     def start_pending(self) -> None:
-        """Start the received plan once pose and wrench flow: fresh (within sensor_timeout) if
-        they ever arrived, else waiting up to connect_timeout for the first ones (discovery)."""
+        """Start the received plan once its episode runs (``EpisodeGate``: up to connect_timeout
+        for its status) and pose and wrench flow: fresh (within sensor_timeout) if they ever
+        arrived, else waiting up to connect_timeout for the first ones (discovery)."""
         plan, received = self.pending
         now = now_seconds(self)
-        stamps = (self.pose_time, self.wrench_time)
+        admission, why = self.gate.admit(plan.episode)
+        if admission is not Admission.RUN:
+            if admission is Admission.REFUSE or now - received > self.p.connect_timeout:
+                self.pending = None
+                self.report(plan, Outcome.ABORTED, f"refused: {why}")
+            return
+        stamps = [w.last for w in self.health.streams.values()]
         if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):
             self.pending = None
             self.filter.reset()
             self.run = GuardedRun(plan, self.tool, self.limits, self.settings, now)
+            self.health.counts["plans_run"] += not self.run.done
             return
         never = any(s is None for s in stamps)
         if now - received > (self.p.connect_timeout if never else self.limits.sensor_timeout):
@@ -191,19 +214,18 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
 
     def on_tick(self) -> None:
+        self.health.ticks.add(now_seconds(self))
         if self.pending is not None:
             self.start_pending()
         run = self.run
         if run is None:
             return
         t = now_seconds(self)
-        stamps = [s for s in (self.pose_time, self.wrench_time) if s is not None]
-        age = t - min(stamps) if len(stamps) == 2 else t - run.t_start
+        stream, age = self.health.oldest(t)
         velocity = np.zeros(2)
-        if not run.done and not self.filter.ready:  # estimating the F/T bias at rest
-            if age > self.limits.sensor_timeout:
-                run.abort(f"sensor timeout: no F/T data for {age:.2f} s", self.tool)
-        elif not run.done:
+        if not run.done and age > self.limits.sensor_timeout:  # the stop within one tick
+            run.abort(f"sensor timeout: {stream} {age:.2f} s old", self.tool)
+        elif not run.done and self.filter.ready:  # (else: estimating the F/T bias at rest)
             force = self.base_force()
             in_plane = self.plane.vector_to_plane(force)
             normal = float(np.sqrt(max(force @ force - in_plane @ in_plane, 0.0)))
@@ -223,8 +245,36 @@ class ExecutorNode(Node):
         v3 = self.plane.vector_from_plane(velocity)
         self.cmd_pub.publish(convert.twist_to_msg(v3, header(self, self.p.base_frame_id)))
 
+    def publish_diagnostics(self) -> None:
+        if self.run is not None:
+            state = f"running plan {self.run.plan.plan_id}"
+        elif self.pending is not None:
+            state = f"plan {self.pending[0].plan_id} waiting to start"
+        else:
+            state = "idle"
+        gate = self.gate
+        episode = (
+            "any"
+            if gate.current is None
+            else f"{gate.current} " + ("RUNNING" if gate.running else "over")
+        )
+        status = self.health.status(now_seconds(self), self.get_name(), state, {"episode": episode})
+        self.diagnostics_pub.publish(
+            DiagnosticArray(header=header(self, self.p.base_frame_id), status=[status])
+        )
+
     def report(self, plan, outcome, detail, history=None, stop_point=None) -> None:
+        """Publish the plan's report. ABORTED: no segments (not evidence), and counted in the
+        diagnostics as refused (detail ``refused: ...``, nothing moved) or as a fault."""
         stop = self.tool if stop_point is None else stop_point
+        if outcome is Outcome.ABORTED:
+            if history is not None and len(history):
+                detail += f" ({len(history)} segments discarded)"
+            history = None
+            refused = detail.startswith("refused")
+            self.health.counts["plans_refused" if refused else "plans_aborted"] += 1
+            if not refused:
+                self.health.fault(now_seconds(self), f"plan {plan.plan_id}: {detail}")
         report = convert.Report(
             episode=plan.episode,
             plan_id=plan.plan_id,
