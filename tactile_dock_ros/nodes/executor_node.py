@@ -158,7 +158,7 @@ class ExecutorNode(Node):
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
-        if self.run is not None or self.pending is not None:
+        if self.busy():  # a second plan is refused, never preempts the running one
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
             return
         admission, why = self.gate.admit(plan.episode)
@@ -169,6 +169,9 @@ class ExecutorNode(Node):
         self.get_logger().info(
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )
+
+    def busy(self) -> bool:
+        return self.run is not None or self.pending is not None
 
     def on_episode_status(self, msg: DiagnosticStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
