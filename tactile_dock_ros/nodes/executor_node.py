@@ -130,8 +130,10 @@ class ExecutorNode(Node):
 
     def on_pose(self, msg: PoseStamped) -> None:
         convert.check_frame("tool pose", msg, self.p.base_frame_id)
-        self.tool = convert.pose_position(msg, self.plane)
-        self.tool_rotation = convert.pose_rotation(msg)
+        tool = convert.pose_position(msg, self.plane)
+        if self.p.wrench_frame == "tool":  # the orientation is used (and checked) only then
+            self.tool_rotation = convert.pose_rotation(msg)
+        self.tool = tool
         self.health.streams["tool_pose"].add(now_seconds(self))
 
     def on_wrench(self, msg: WrenchStamped) -> None:

@@ -531,7 +531,7 @@ def control_jitter(
     plan_id = probe.plan(traverse(tool, x), speed=0.2)
     burst_ids = []
     t0 = time.monotonic()
-    while burst_size and time.monotonic() < t0 + 2.0:
+    while burst_size and time.monotonic() < t0 + 2.0 and not probe.report(plan_id, 0.0):
         burst_ids += [probe.plan([[x, 0.3], [x, 0.2]]) for _ in range(burst_size)]
         probe.spin_until(lambda: False, burst_period_s)
     report = probe.report(plan_id, timeout_s=30.0)
@@ -544,6 +544,7 @@ def control_jitter(
     bursts = [r for r in probe.rec.reports[n_reports:] if r.plan_id in set(burst_ids)]
     return {
         "outcome": None if report is None else report.outcome_name,
+        "detail": None if report is None else report.detail,
         "commands": int(stamps.size),
         "burst_plans": len(burst_ids),
         "burst_reports": len(bursts),
