@@ -97,15 +97,17 @@ def _load(args, log_dir: Path) -> dict:
             bringup.isolate_dds()
             with safety.mock_floor(
                 log_dir / f"load_{name}_{r}", FAST_DIAGNOSTICS, False, amplify
-            ) as (probe, env, _):
-                result = safety.control_jitter(probe, env, burst_size=burst)
+            ) as (probe, env, processes):
+                pid = processes["executor"].pid
+                result = safety.control_jitter(probe, env, burst, executor_pid=pid)
             runs[name].append(result)
             j, i = result["jitter_s"], result["interval_s"]
             print(
                 f"  {name:<8} rep {r}: {result['outcome']}, {result['commands']} commands, "
                 f"interval p50 {i['p50'] * 1e3:.2f} ms p99 {i['p99'] * 1e3:.2f} ms, jitter p50 "
                 f"{j['p50'] * 1e3:.2f} ms p99 {j['p99'] * 1e3:.2f} ms, executor received "
-                f"{result['executor_rate_hz']['wrench']:.0f} Hz wrench"
+                f"{result['executor_rate_hz']['wrench']:.0f} Hz wrench, executor CPU "
+                f"{result['executor_cpu_percent']:.0f}%"
             )
 
     def median(name, key, q):
@@ -124,15 +126,24 @@ def _load(args, log_dir: Path) -> dict:
         name: float(np.median([run["executor_rate_hz"]["wrench"] for run in runs[name]]))
         for name in runs
     }
+    cpu = {
+        name: float(np.median([run["executor_cpu_percent"] for run in runs[name]])) for name in runs
+    }
     print(f"{'load (medians)':<18} {'baseline':>9} {'loaded':>9} {'ratio':>6}")
     for key, row in table.items():
         ratio = "-" if row["ratio"] is None else f"{row['ratio']:.2f}"
         print(f"{key:<18} {row['baseline']:9.2f} {row['loaded']:9.2f} {ratio:>6}")
     print(
         f"executor wrench rate: baseline {rates['baseline']:.0f} Hz, "
-        f"loaded {rates['loaded']:.0f} Hz"
+        f"loaded {rates['loaded']:.0f} Hz; executor CPU baseline {cpu['baseline']:.0f}%, "
+        f"loaded {cpu['loaded']:.0f}% of one core"
     )
-    return {"runs": runs, "table": table, "executor_wrench_rate_hz": rates}
+    return {
+        "runs": runs,
+        "table": table,
+        "executor_wrench_rate_hz": rates,
+        "executor_cpu_percent": cpu,
+    }
 
 
 def run(args) -> dict:

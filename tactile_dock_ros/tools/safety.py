@@ -15,6 +15,7 @@ free of the probe's own scheduling.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -516,18 +517,30 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
 # --------------------------------------------------------------------------- load
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (Linux /proc), seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def control_jitter(
-    probe: Probe, env: Envelope, burst_size: int = 0, burst_period_s: float = 0.25
+    probe: Probe,
+    env: Envelope,
+    burst_size: int = 0,
+    burst_period_s: float = 0.25,
+    executor_pid: int | None = None,
 ) -> dict:
     """Run one plan (0.7 m at 0.2 m/s); every ``burst_period_s`` of its first 2 s publish
     ``burst_size`` more plans (refused: one runs; harmless free-space moves if one slipped
     through). Intervals between the stamps of consecutive commands of the run, and their
     jitter |interval - control period| (p50/p99/max, seconds); the same from the probe's
-    receive times; the refusals' details; the executor's diagnostics at the end."""
+    receive times; the refusals' details; the executor's diagnostics at the end and, given
+    its pid, its CPU use during the run (% of one core)."""
     tool = probe.tool(env)
     x = -0.5 if tool[0] > 0 else 0.5
     n_commands, n_reports = len(probe.rec.commands), len(probe.rec.reports)
     n_diagnostics, originals = len(probe.rec.diagnostics), probe.originals
+    cpu0 = cpu_seconds(executor_pid) if executor_pid else 0.0
     plan_id = probe.plan(traverse(tool, x), speed=0.2)
     burst_ids = []
     t0 = time.monotonic()
@@ -536,6 +549,7 @@ def control_jitter(
         probe.spin_until(lambda: False, burst_period_s)
     report = probe.report(plan_id, timeout_s=30.0)
     at_end, elapsed = len(probe.rec.commands), time.monotonic() - t0
+    cpu = (cpu_seconds(executor_pid) - cpu0) / elapsed * 100 if executor_pid else None
     during = [v for _, v, _ in probe.rec.diagnostics[n_diagnostics:]]
     probe.spin_until(lambda: False, 0.5)  # reports of the last burst (best effort)
     stamps = np.array([t for t, _, _ in probe.rec.commands[n_commands:at_end]])
@@ -557,5 +571,6 @@ def control_jitter(
             k: float(np.median([float(d[f"{k}_rate_hz"]) for d in during])) if during else 0.0
             for k in ("wrench", "tool_pose")
         },
+        "executor_cpu_percent": cpu,
         "diagnostics": probe.diagnostics(),
     }
