@@ -185,15 +185,17 @@ class Probe(Node):
         """Plans matched, commands matched, the services up and the executor's diagnostics
         showing both sensor streams."""
 
-        def ready() -> bool:
-            return (
-                self.plan_pub.get_subscription_count() > 0
-                and self.count_publishers(COMMAND) > 0
-                and all(c.service_is_ready() for c in self.drop_clients.values())
-                and self.sensors_flowing()
-            )
+        return self.spin_until(lambda: not self.not_ready(), timeout_s)
 
-        return self.spin_until(ready, timeout_s)
+    def not_ready(self) -> list[str]:
+        """What :meth:`wait_ready` still waits for."""
+        checks = {
+            "plan subscriber": self.plan_pub.get_subscription_count() > 0,
+            "command publisher": self.count_publishers(COMMAND) > 0,
+            "drop services": all(c.service_is_ready() for c in self.drop_clients.values()),
+            "diagnostics OK": self.sensors_flowing(),
+        }
+        return [name for name, ok in checks.items() if not ok]
 
     def diagnostics(self) -> dict[str, str]:
         return self.rec.diagnostics[-1][1] if self.rec.diagnostics else {}
@@ -278,7 +280,10 @@ def mock_floor(
         with bringup.running(arguments, log_dir, only={"executor", "mock_hardware"}) as procs:
             if not probe.wait_ready():
                 logs = {p.name: p.read_text()[-1500:] for p in log_dir.glob("*.log")}
-                raise RuntimeError(f"executor / mock_hardware not ready: {logs}")
+                missing = probe.not_ready()
+                raise RuntimeError(
+                    f"executor / mock_hardware: no {missing}; last {probe.diagnostics()}: {logs}"
+                )
             yield probe, Envelope.from_config(config), procs
     finally:
         probe.spinner.shutdown()
