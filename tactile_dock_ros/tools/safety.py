@@ -193,7 +193,7 @@ class Probe(Node):
             "plan subscriber": self.plan_pub.get_subscription_count() > 0,
             "command publisher": self.count_publishers(COMMAND) > 0,
             "drop services": all(c.service_is_ready() for c in self.drop_clients.values()),
-            "diagnostics OK": self.sensors_flowing(),
+            "diagnostics without ERROR": self.sensors_flowing(),
         }
         return [name for name, ok in checks.items() if not ok]
 
@@ -205,7 +205,7 @@ class Probe(Node):
         streams fresher than its sensor timeout."""
         if not self.rec.diagnostics or self.rec.diagnostics[-1][0] <= since:
             return False
-        return self.rec.diagnostics[-1][2].level == DiagnosticStatus.OK
+        return self.rec.diagnostics[-1][2].level != DiagnosticStatus.ERROR  # WARN: loop late
 
     def plan(self, waypoints, speed=0.2, threshold=3.0, episode=None) -> int:
         """Publish a DOCK plan (load straight down, along its last move); returns its id."""
