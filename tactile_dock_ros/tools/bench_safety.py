@@ -57,8 +57,9 @@ def _dropout(args, log_dir: Path) -> dict:
     latencies = [r["latency_s"] for r in rows if r["latency_s"] is not None]
     summary = {
         "dropouts": len(rows),
+        "never_moved": sum("error" in r for r in rows),
         "stopped": len(latencies),
-        "aborted": sum(r["outcome"] == "ABORTED" for r in rows),
+        "aborted": sum(r["outcome"] == "ABORTED" for r in rows if "error" not in r),
         "aborted_with_segments": sum(bool(r["segments"]) for r in rows),
         "moving_after_stop": sum(r["moving_after_stop"] for r in rows),
         "latency_ms": _ms(safety.percentiles(latencies)),

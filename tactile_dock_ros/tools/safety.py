@@ -482,13 +482,17 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     stream's last sample + sensor_timeout): the executor's timeout expires ``sensor_timeout``
     after it received the last sample, which is no earlier than that sample's stamp, so the
     figure is conservative (it includes the last sample's delivery delay).
-    ``moving_after_stop``: moving commands stamped after that zero command."""
+    ``moving_after_stop``: moving commands stamped after that zero command. A run in which
+    the arm never moved (its plan aborted first) has ``latency_s`` None and an ``error``."""
+    probe.spin_until(probe.sensors_flowing, 30.0)
     tool = probe.tool(env)
     n_commands = len(probe.rec.commands)
     plan_id = probe.plan(traverse(tool, -0.5 if tool[0] > 0 else 0.5), speed=0.1)
-
     if not probe.spin_until(lambda: _moving(probe.rec.commands[n_commands:]), 15.0):
-        return {"stream": stream, "error": "the arm never moved"}
+        report = probe.report(plan_id, timeout_s=1.0)
+        detail = None if report is None else report.detail
+        return {"stream": stream, "latency_s": None, "moving_after_stop": 0, "outcome": None,
+                "detail": detail, "segments": None, "error": "the arm never moved"}  # fmt: skip
     probe.spin_until(lambda: False, delay_s)
     samples = probe.rec.wrenches if stream == "wrench" else probe.rec.poses
     assert probe.drop(stream, True), f"drop_{stream} failed"
