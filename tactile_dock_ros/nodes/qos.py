@@ -4,7 +4,9 @@
   a best-effort subscription also matches a reliable driver.
 * ``LATCHED``: state that a late joiner must see (prior, contact history, samples, episode
   status): reliable, transient local, keep last 1.
-* ``EVENTS``: plans and execution reports: reliable, volatile, keep last 10 (each is handled once).
+* ``EVENTS``: plans and execution reports: reliable, volatile, keep last 100 (each is handled
+  once; a burst of plans, and of their refusal reports, must not push out the first of them:
+  with 10, a loaded executor lost the running plan, ``bench safety --parts load``).
 * ``COMMAND``: Cartesian commands to the arm: reliable (matches reliable and best-effort
   drivers), keep last 1 (only the newest command matters).
 """
@@ -21,7 +23,7 @@ LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 EVENTS = QoSProfile(
-    depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
 )
 COMMAND = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
