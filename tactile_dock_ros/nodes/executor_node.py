@@ -144,6 +144,13 @@ class ExecutorNode(Node):
         now = now_seconds(self)
         self.health.streams["wrench"].add(now)
         self.filter.add(now, force)
+        run = self.run
+        if run is not None and not run.done and self.filter.ready:  # stop now, not next tick
+            total = float(np.linalg.norm(self.base_force()))
+            if total > self.limits.max_force:
+                run.abort(f"force {total:.1f} N (3-D) above the limit", self.tool)
+                self.command(np.zeros(2))
+                self.end_run(now)
 
     def base_force(self) -> np.ndarray:
         """Bias-free filtered force (3,) newtons in the base frame."""
@@ -238,13 +245,17 @@ class ExecutorNode(Node):
             velocity = run.check_next(self.tool, velocity, self.dt)
         self.command(velocity)
         if run.done:
-            self.run = None
-            self.report(run.plan, run.outcome, run.detail, run.history, run.stop_point)
-            self.get_logger().info(
-                f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
-                f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
-                f"max commanded speed {run.max_speed_commanded:.3f} m/s"
-            )
+            self.end_run(t)
+
+    def end_run(self, t: float) -> None:
+        """Report the finished run (the arm was just commanded to stop) and forget it."""
+        run, self.run = self.run, None
+        self.report(run.plan, run.outcome, run.detail, run.history, run.stop_point)
+        self.get_logger().info(
+            f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
+            f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
+            f"max commanded speed {run.max_speed_commanded:.3f} m/s"
+        )
 
     def command(self, velocity: np.ndarray) -> None:
         v3 = self.plane.vector_from_plane(velocity)
