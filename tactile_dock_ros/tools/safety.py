@@ -575,7 +575,7 @@ def control_jitter(
         "interval_s": percentiles(intervals),
         "jitter_s": percentiles(np.abs(intervals - env.control_period)),
         "receive_jitter_s": percentiles(np.abs(np.diff(received) - env.control_period)),
-        "mock_rate_hz": (probe.originals - originals) / 2 / elapsed,  # per stream
+        "mock_rate_hz": (probe.originals - originals) / 2 / elapsed,  # per stream; 0 unamplified
         "executor_rate_hz": {  # the median over the run of what the executor received
             k: float(np.median([float(d[f"{k}_rate_hz"]) for d in during])) if during else 0.0
             for k in ("wrench", "tool_pose")
