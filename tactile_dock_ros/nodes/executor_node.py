@@ -7,22 +7,25 @@ planner resends the plan being executed every 0.5 s: when no copy arrived for
 ``producer_timeout`` the planner is gone (crashed, killed) and the arm is stopped (ABORTED,
 detail ``convert.PRODUCER_LOST``; a restarted planner replans);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
-``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends. Messages in
-an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
+``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends, and
+``/diagnostics`` (DiagnosticArray, every ``diagnostics_period``: ``nodes.diagnostics``). Messages
+in an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
 safety checks (the force limit on the whole 3-D force, out-of-plane pushes included) are in
-``nodes.guarded``; this file is the ROS glue.
+``nodes.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
+this file is the ROS glue. An ABORTED report carries no segments: what an aborted attempt felt
+is not evidence (a stale sensor or a stopped plan may have misread it).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport
-from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes import convert, qos, validate
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
     header,
@@ -31,8 +34,10 @@ from tactile_dock_ros.nodes.common import (
     run,
     subscribe,
 )
+from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
 from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
+from tactile_dock_ros.nodes.watchdog import Admission, EpisodeGate
 
 
 def _tuning(name: str, *spec) -> Param:
@@ -82,6 +87,7 @@ PARAMS = [
         1.5,
         60.0,
     ),
+    Param("diagnostics_period", 1.0, "period of the /diagnostics status", "s", 0.05, 60.0),
 ]
 
 
@@ -114,15 +120,16 @@ class ExecutorNode(Node):
         self.dt = 1.0 / self.p.control_rate_hz
         self.tool: np.ndarray | None = None
         self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
-        self.pose_time = self.wrench_time = None
+        self.health = ExecutorHealth(self.p.sensor_timeout, self.dt)
+        self.gate = EpisodeGate()
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
         self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
-        self.episode_state = None  # (state, episode) of the planner's latest episode_status
         self.last_plan = (0, 0)  # (episode, plan_id) of the newest plan accepted
         self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the run plan
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", qos.EVENTS)
         plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
         wrench_id = base_id if self.p.wrench_frame == "base" else None  # else the sensor's frame
         subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id)
@@ -130,17 +137,31 @@ class ExecutorNode(Node):
         subscribe(self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id)
         subscribe(self, DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED)
         self.create_timer(self.dt, self.on_tick)
+        self.create_timer(self.p.diagnostics_period, self.publish_diagnostics)
 
     def on_pose(self, msg: PoseStamped) -> None:
-        self.tool = convert.pose_position(msg, self.plane)
-        self.tool_rotation = convert.pose_rotation(msg)
-        self.pose_time = now_seconds(self)
+        tool = convert.pose_position(msg, self.plane)
+        if self.p.wrench_frame == "tool":  # the rotation is computed only when it is used
+            self.tool_rotation = convert.pose_rotation(msg)
+        else:  # but a NaN orientation is malformed input all the same
+            q = msg.pose.orientation
+            validate.finite("pose.orientation", [q.x, q.y, q.z, q.w])
+        self.tool = tool
+        self.health.streams["tool_pose"].add(now_seconds(self))
 
     def on_wrench(self, msg: WrenchStamped) -> None:
         """Filter the force in the frame it comes in (the sensor bias is constant there)."""
         force = convert.wrench_force(msg)
-        self.wrench_time = now_seconds(self)
-        self.filter.add(self.wrench_time, force)
+        now = now_seconds(self)
+        self.health.streams["wrench"].add(now)
+        self.filter.add(now, force)
+        run = self.run
+        if run is not None and not run.done and self.filter.ready:  # stop now, not next tick
+            total = float(np.linalg.norm(self.base_force()))
+            if total > self.limits.max_force:
+                run.abort(f"force {total:.1f} N (3-D) above the limit", self.tool)
+                self.command(np.zeros(2))
+                self.end_run(now)
 
     def base_force(self) -> np.ndarray:
         """Bias-free filtered force (3,) newtons in the base frame."""
@@ -160,8 +181,12 @@ class ExecutorNode(Node):
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
-        if self.run is not None or self.pending is not None:
+        if self.busy():  # a second plan is refused, never preempts the running one
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
+            return
+        admission, why = self.gate.admit(plan.episode)
+        if admission is Admission.REFUSE:
+            self.report(plan, Outcome.ABORTED, f"refused: {why}")
             return
         self.pending = (plan, now_seconds(self))
         self.plan_heard = (key, now_seconds(self))  # its copies: the planner lives
@@ -169,14 +194,12 @@ class ExecutorNode(Node):
             f"plan {plan.plan_id}: {len(plan.waypoints)} waypoints, P_dock={plan.p_dock:.3f}"
         )
 
+    def busy(self) -> bool:
+        return self.run is not None or self.pending is not None
+
     def check_order(self, plan) -> None:
-        """Once the planner's episode_status is known, only plans of its RUNNING episode run,
-        each plan after the last one (a late or replayed plan is dropped, no report)."""
-        if self.episode_state not in (None, ("RUNNING", plan.episode)):
-            raise convert.MessageError(
-                f"plan {plan.plan_id} of episode {plan.episode}, but the planner's episode "
-                f"{self.episode_state[1]} is {self.episode_state[0]}"
-            )
+        """Plans of one episode run in plan-id order: a late or replayed plan is dropped (no
+        report); which episodes may run at all is ``EpisodeGate``'s decision."""
         if self.last_plan[0] == plan.episode and plan.plan_id <= self.last_plan[1]:
             raise convert.MessageError(
                 f"plan {plan.plan_id} of episode {plan.episode} after its plan {self.last_plan[1]}"
@@ -185,7 +208,8 @@ class ExecutorNode(Node):
 
     def on_episode_status(self, msg: DiagnosticStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
-        state, episode = self.episode_state = convert.episode_status_from_msg(msg)
+        state, episode = convert.episode_status_from_msg(msg)
+        self.gate.update(episode, state)
         plan = self.run.plan if self.run else self.pending[0] if self.pending else None
         if plan is None or (plan.episode == episode and state == "RUNNING"):
             return
@@ -198,15 +222,23 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"stopped before starting: {why}")
 
     def start_pending(self) -> None:
-        """Start the received plan once pose and wrench flow: fresh (within sensor_timeout) if
-        they ever arrived, else waiting up to connect_timeout for the first ones (discovery)."""
+        """Start the received plan once its episode runs (``EpisodeGate``: up to connect_timeout
+        for its status) and pose and wrench flow: fresh (within sensor_timeout) if they ever
+        arrived, else waiting up to connect_timeout for the first ones (discovery)."""
         plan, received = self.pending
         now = now_seconds(self)
-        stamps = (self.pose_time, self.wrench_time)
+        admission, why = self.gate.admit(plan.episode)
+        if admission is not Admission.RUN:
+            if admission is Admission.REFUSE or now - received > self.p.connect_timeout:
+                self.pending = None
+                self.report(plan, Outcome.ABORTED, f"refused: {why}")
+            return
+        stamps = [w.last for w in self.health.streams.values()]
         if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):
             self.pending = None
             self.filter.reset()
             self.run = GuardedRun(plan, self.tool, self.limits, self.settings, now)
+            self.health.counts["plans_run"] += not self.run.done
             return
         never = any(s is None for s in stamps)
         if now - received > (self.p.connect_timeout if never else self.limits.sensor_timeout):
@@ -217,8 +249,9 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
 
     def on_tick(self) -> None:
+        self.health.ticks.add(now_seconds(self))
         silent = now_seconds(self) - self.plan_heard[1]
-        if silent > self.p.producer_timeout and (self.run is not None or self.pending is not None):
+        if silent > self.p.producer_timeout and self.busy():
             why = f"{convert.PRODUCER_LOST} no copy of the plan for {silent:.1f} s"
             if self.run is not None and not self.run.done:
                 self.run.abort(why, self.tool)  # stopped and reported below
@@ -231,13 +264,11 @@ class ExecutorNode(Node):
         if run is None:
             return
         t = now_seconds(self)
-        stamps = [s for s in (self.pose_time, self.wrench_time) if s is not None]
-        age = t - min(stamps) if len(stamps) == 2 else t - run.t_start
+        stream, age = self.health.oldest(t)
         velocity = np.zeros(2)
-        if not run.done and not self.filter.ready:  # estimating the F/T bias at rest
-            if age > self.limits.sensor_timeout:
-                run.abort(f"sensor timeout: no F/T data for {age:.2f} s", self.tool)
-        elif not run.done:
+        if not run.done and age > self.limits.sensor_timeout:  # the stop within one tick
+            run.abort(f"sensor timeout: {stream} {age:.2f} s old", self.tool)
+        elif not run.done and self.filter.ready:  # (else: estimating the F/T bias at rest)
             force = self.base_force()
             in_plane = self.plane.vector_to_plane(force)
             normal = float(np.sqrt(max(force @ force - in_plane @ in_plane, 0.0)))
@@ -245,20 +276,52 @@ class ExecutorNode(Node):
             velocity = run.check_next(self.tool, velocity, self.dt)
         self.command(velocity)
         if run.done:
-            self.run = None
-            self.report(run.plan, run.outcome, run.detail, run.history, run.stop_point)
-            self.get_logger().info(
-                f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
-                f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
-                f"max commanded speed {run.max_speed_commanded:.3f} m/s"
-            )
+            self.end_run(t)
+
+    def end_run(self, t: float) -> None:
+        """Report the finished run (the arm was just commanded to stop) and forget it."""
+        run, self.run = self.run, None
+        self.report(run.plan, run.outcome, run.detail, run.history, run.stop_point)
+        self.get_logger().info(
+            f"plan {run.plan.plan_id}: outcome={run.outcome.name} ({run.detail}); "
+            f"{len(run.history)} segments, {t - run.t_start:.2f} s, "
+            f"max commanded speed {run.max_speed_commanded:.3f} m/s"
+        )
 
     def command(self, velocity: np.ndarray) -> None:
         v3 = self.plane.vector_from_plane(velocity)
         self.cmd_pub.publish(convert.twist_to_msg(v3, header(self, self.p.base_frame_id)))
 
+    def publish_diagnostics(self) -> None:
+        if self.run is not None:
+            state = f"running plan {self.run.plan.plan_id}"
+        elif self.pending is not None:
+            state = f"plan {self.pending[0].plan_id} waiting to start"
+        else:
+            state = "idle"
+        gate = self.gate
+        episode = (
+            "any"
+            if gate.current is None
+            else f"{gate.current} " + ("RUNNING" if gate.running else "over")
+        )
+        status = self.health.status(now_seconds(self), self.get_name(), state, {"episode": episode})
+        self.diagnostics_pub.publish(
+            DiagnosticArray(header=header(self, self.p.base_frame_id), status=[status])
+        )
+
     def report(self, plan, outcome, detail, history=None, stop_point=None) -> None:
+        """Publish the plan's report. ABORTED: no segments (not evidence), and counted in the
+        diagnostics as refused (detail ``refused: ...``, nothing moved) or as a fault."""
         stop = self.tool if stop_point is None else stop_point
+        if outcome is Outcome.ABORTED:
+            if history is not None and len(history):
+                detail += f" ({len(history)} segments discarded)"
+            history = None
+            refused = detail.startswith("refused")
+            self.health.counts["plans_refused" if refused else "plans_aborted"] += 1
+            if not refused:
+                self.health.fault(now_seconds(self), f"plan {plan.plan_id}: {detail}")
         report = convert.Report(
             episode=plan.episode,
             plan_id=plan.plan_id,

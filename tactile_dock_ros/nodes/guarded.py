@@ -98,7 +98,14 @@ class _Phase(Enum):
 
 
 def refusal(plan: PlanCommand, tool: np.ndarray, limits: Limits, settings: Settings) -> str:
-    """Why the plan must not run ('' when it may): limits are checked before moving."""
+    """Why the plan must not run ('' when it may): limits are checked before moving. A plan
+    faster than the limit is refused rather than slowed down: its contact threshold was chosen
+    for its speed."""
+    numbers = np.concatenate([np.ravel(plan.waypoints), [plan.max_speed, plan.force_threshold]])
+    if not np.all(np.isfinite(numbers)) or not np.all(np.isfinite(tool)):
+        return "NaN or inf in the plan or the tool position"
+    if plan.max_speed <= 0 or plan.force_threshold <= 0:
+        return "plan speed and contact threshold must be > 0"
     if plan.max_speed > limits.max_speed:
         return f"plan speed {plan.max_speed:.3f} m/s exceeds the limit {limits.max_speed} m/s"
     if max(plan.force_threshold, settings.load_force) > limits.max_force:
@@ -144,6 +151,9 @@ class GuardedRun:
 
     def __post_init__(self) -> None:
         tool = np.asarray(self.tool, float)
+        if reason := refusal(self.plan, tool, self.limits, self.settings):
+            self._finish(Outcome.ABORTED, f"refused: {reason}", tool)
+            return
         waypoints = self.plan.waypoints
         far = np.linalg.norm(waypoints[0] - tool) > self.settings.waypoint_tolerance
         self._path = np.vstack([tool, waypoints]) if far else np.vstack([tool, waypoints[1:]])
@@ -154,8 +164,6 @@ class GuardedRun:
         if self.plan.compliant:  # room for a slide at the loading speed, and for settling
             slide = self.settings.max_slide / min(self.settings.load_speed, self._speed)
             self._budget += slide + self.settings.settle_time
-        if reason := refusal(self.plan, tool, self.limits, self.settings):
-            self._finish(Outcome.ABORTED, f"refused: {reason}", tool)
 
     @property
     def done(self) -> bool:

@@ -10,7 +10,9 @@ the truth for RViz, plots and tests; the planner never subscribes to it. With
 ``perception_config`` set, a depth camera at that file's extrinsic, displaced by
 ``calibration_error`` (the deliberate miscalibration), renders the terrain with the file's depth
 noise and real occlusion (``perception.render``), published on ``depth/image`` and
-``depth/camera_info``.
+``depth/camera_info``. Fault injection: ``~/drop_wrench`` and ``~/drop_pose`` (std_srvs/SetBool)
+stop (true) or resume (false) that sensor stream while the arm keeps moving on its last command,
+as a crashed F/T driver or a lost pose feed would.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import yaml
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
+from std_srvs.srv import SetBool
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.shape import GaussianShape
@@ -112,6 +115,9 @@ class MockHardwareNode(Node):
         truth_pub.publish(convert.shape_to_msg(truth, header(self, self.p.plane_frame_id)))
         base_id = self.p.base_frame_id
         subscribe(self, TwistStamped, "cmd_twist", self.on_command, qos.COMMAND, base_id)
+        self.dropped = {"wrench": False, "pose": False}
+        for stream in self.dropped:
+            self.create_service(SetBool, f"~/drop_{stream}", self.drop_service(stream))
         self.create_timer(self.dt, self.on_tick)
         if self.p.perception_config:
             self.start_camera(vertices)
@@ -147,6 +153,16 @@ class MockHardwareNode(Node):
 
         self.create_timer(1.0 / self.p.camera_rate_hz, publish)
 
+    def drop_service(self, stream: str):
+        def drop(request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+            self.dropped[stream] = request.data
+            response.success = True
+            response.message = f"{stream} {'stopped' if request.data else 'publishing'}"
+            self.get_logger().warning(f"fault injection: {response.message}")
+            return response
+
+        return drop
+
     def on_command(self, msg: TwistStamped) -> None:
         self.velocity = convert.twist_velocity(msg, self.plane)
         self.command_time = now_seconds(self)
@@ -164,8 +180,10 @@ class MockHardwareNode(Node):
             + np.asarray(self.p.force_bias)
             + self.rng.normal(0.0, self.p.force_noise, 3)
         )
-        self.pose_pub.publish(convert.pose_to_msg(position, stamp))
-        self.wrench_pub.publish(convert.wrench_to_msg(force, stamp))
+        if not self.dropped["pose"]:
+            self.pose_pub.publish(convert.pose_to_msg(position, stamp))
+        if not self.dropped["wrench"]:
+            self.wrench_pub.publish(convert.wrench_to_msg(force, stamp))
 
 
 def main(args: list[str] | None = None) -> int:

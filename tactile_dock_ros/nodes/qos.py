@@ -4,8 +4,9 @@
   a best-effort subscription also matches a reliable driver.
 * ``LATCHED``: state that a late joiner must see (prior, contact history, samples, episode
   status): reliable, transient local, keep last 1.
-* ``EVENTS``: plans: reliable, volatile, keep last 10 (each is handled once; the planner resends
-  the plan being executed every second).
+* ``EVENTS``: plans: reliable, volatile, keep last 100 (each is handled once; the planner resends
+  the plan being executed every 0.5 s; a burst of plans must not push out the first of them:
+  with 10, a loaded executor lost the running plan, ``bench safety --parts load``).
 * ``REPORTS``: execution reports: reliable, transient local, keep last ``REPORT_DEPTH``: a node
   restarted mid-episode (inference, planner) receives the reports it missed; receivers drop
   duplicates by (episode, plan id). Volatile subscribers (``ros2 topic echo``) match too.
@@ -25,7 +26,7 @@ LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
 EVENTS = QoSProfile(
-    depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
 )
 REPORT_DEPTH = 32  # more than the reports of one episode sent while a node restarts
 REPORTS = QoSProfile(

@@ -32,6 +32,7 @@ SUITES = {
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
+    "safety": "executor under faults over DDS: sensor dropout latency, envelope, load jitter",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
 }
 

@@ -1,0 +1,159 @@
+"""The executor under faults on the mock arm over DDS (issue 13 items 3, 4, 6).
+
+executor and mock_hardware run as processes from the mock launch file on a flat floor
+(``tools.safety``); the bench plays the planner and records every command to the arm.
+
+* dropout: ``--dropouts`` times, while a plan moves, the mock stops its wrench or its pose
+  stream (alternating; seeded random delay after the arm starts moving). Latency = stamp of
+  the first zero command minus (stamp of the stream's last sample + ``sensor_timeout``),
+  p50/p99/max; the requirement is 2 control periods.
+* envelope: the refusal scenarios (target outside the box, absurd speed, force threshold
+  above the limit, NaN/inf, plans of superseded/ended episodes), a 60 N force fault while
+  moving, two plans at once; every command checked against the box, speed and force limits.
+* load: one 0.7 m plan at 0.2 m/s; baseline (sensors at the mock's rate, no other plans) vs
+  loaded (each sensor sample republished 10 times, bursts of 10 plans every 0.25 s): the
+  intervals between consecutive command stamps and their jitter |interval - period|,
+  p50/p99 per repetition, medians over ``--repeats``, loaded / baseline ratios.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from tactile_dock_ros.tools import bringup, safety
+
+PARTS = ("dropout", "envelope", "load")
+FAST_DIAGNOSTICS = {"executor": {"diagnostics_period": 0.2}}
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
+    parser.add_argument("--dropouts", type=int, default=20, help="dropouts to measure")
+    parser.add_argument("--amplify", type=int, default=10, help="sensor rate factor (load)")
+    parser.add_argument("--burst", type=int, default=10, help="plans per burst (load)")
+    parser.add_argument("--log-dir", type=Path, help="node logs (default: a temporary dir)")
+
+
+def _ms(stats: dict) -> dict:
+    return {k: (v * 1e3 if k != "n" else v) for k, v in stats.items()}
+
+
+def _dropout(args, log_dir: Path) -> dict:
+    rng = np.random.default_rng(args.seed)
+    rows = []
+    with safety.mock_floor(log_dir / "dropout", FAST_DIAGNOSTICS) as (probe, env, _):
+        for i in range(args.dropouts):
+            stream = ("wrench", "pose")[i % 2]
+            row = safety.dropout(probe, env, stream, float(rng.uniform(0.0, 0.3)))
+            rows.append(row)
+            latency = row["latency_s"]
+            print(
+                f"  dropout {i + 1:3d} {stream:<6} "
+                f"{'-' if latency is None else f'{latency * 1e3:6.1f} ms'}  {row['outcome']}"
+            )
+    latencies = [r["latency_s"] for r in rows if r["latency_s"] is not None]
+    summary = {
+        "dropouts": len(rows),
+        "never_moved": sum("error" in r for r in rows),
+        "stopped": len(latencies),
+        "aborted": sum(r["outcome"] == "ABORTED" for r in rows if "error" not in r),
+        "aborted_with_segments": sum(bool(r["segments"]) for r in rows),
+        "moving_after_stop": sum(r["moving_after_stop"] for r in rows),
+        "latency_ms": _ms(safety.percentiles(latencies)),
+        "within_2_periods": sum(x <= 2 * env.control_period for x in latencies),
+        "control_period_ms": env.control_period * 1e3,
+        "sensor_timeout_s": env.sensor_timeout,
+    }
+    lat = summary["latency_ms"]
+    print(
+        f"dropout: {summary['stopped']}/{len(rows)} stopped, latency after the timeout "
+        f"p50 {lat['p50']:.1f} ms, p99 {lat['p99']:.1f} ms, max {lat['max']:.1f} ms "
+        f"({summary['within_2_periods']} within 2 periods = {2 * env.control_period * 1e3:.0f} ms)"
+    )
+    return {"rows": rows, "summary": summary}
+
+
+def _envelope(args, log_dir: Path) -> dict:
+    with safety.mock_floor(log_dir / "envelope", FAST_DIAGNOSTICS) as (probe, env, _):
+        result = safety.envelope_scenarios(probe, env)
+    for row in result["refusals"]:
+        print(f"  {row['scenario']:<36} refused={row['refused']}  {row['detail']}")
+    print(f"  {'force fault (60 N while moving)':<36} {result['force_fault']}")
+    print(f"  {'two plans at once':<36} {result['two_plans']}")
+    print(
+        f"envelope: {result['commands']} commands ({result['moving_commands']} moving), "
+        f"{len(result['violations'])} violations"
+    )
+    return result
+
+
+def _load(args, log_dir: Path) -> dict:
+    configs = {"baseline": (1, 0), "loaded": (args.amplify, args.burst)}
+    runs = {name: [] for name in configs}
+    for r in range(args.repeats):
+        for name, (amplify, burst) in configs.items():
+            bringup.isolate_dds()
+            with safety.mock_floor(
+                log_dir / f"load_{name}_{r}", FAST_DIAGNOSTICS, False, amplify
+            ) as (probe, env, processes):
+                pid = processes["executor"].pid
+                result = safety.control_jitter(probe, env, burst, executor_pid=pid)
+            runs[name].append(result)
+            j, i = result["jitter_s"], result["interval_s"]
+            print(
+                f"  {name:<8} rep {r}: {result['outcome']}, {result['commands']} commands, "
+                f"interval p50 {i['p50'] * 1e3:.2f} ms p99 {i['p99'] * 1e3:.2f} ms, jitter p50 "
+                f"{j['p50'] * 1e3:.2f} ms p99 {j['p99'] * 1e3:.2f} ms, executor received "
+                f"{result['executor_rate_hz']['wrench']:.0f} Hz wrench, executor CPU "
+                f"{result['executor_cpu_percent']:.0f}%"
+            )
+
+    def median(name, key, q):
+        return float(np.median([run[key][q] for run in runs[name]])) * 1e3
+
+    table = {}
+    for key in ("interval_s", "jitter_s"):
+        for q in ("p50", "p99", "max"):
+            base, loaded = median("baseline", key, q), median("loaded", key, q)
+            table[f"{key[:-2]}_{q}_ms"] = {
+                "baseline": base,
+                "loaded": loaded,
+                "ratio": loaded / base if base > 0 else None,
+            }
+    rates = {
+        name: float(np.median([run["executor_rate_hz"]["wrench"] for run in runs[name]]))
+        for name in runs
+    }
+    cpu = {
+        name: float(np.median([run["executor_cpu_percent"] for run in runs[name]])) for name in runs
+    }
+    print(f"{'load (medians)':<18} {'baseline':>9} {'loaded':>9} {'ratio':>6}")
+    for key, row in table.items():
+        ratio = "-" if row["ratio"] is None else f"{row['ratio']:.2f}"
+        print(f"{key:<18} {row['baseline']:9.2f} {row['loaded']:9.2f} {ratio:>6}")
+    print(
+        f"executor wrench rate: baseline {rates['baseline']:.0f} Hz, "
+        f"loaded {rates['loaded']:.0f} Hz; executor CPU baseline {cpu['baseline']:.0f}%, "
+        f"loaded {cpu['loaded']:.0f}% of one core"
+    )
+    return {
+        "runs": runs,
+        "table": table,
+        "executor_wrench_rate_hz": rates,
+        "executor_cpu_percent": cpu,
+    }
+
+
+def run(args) -> dict:
+    if args.dropouts < 1:
+        raise SystemExit("--dropouts must be >= 1")
+    log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="bench_safety_"))
+    out = {"parts": args.parts, "log_dir": str(log_dir)}
+    for part in args.parts:
+        bringup.isolate_dds()
+        print(f"== {part}")
+        out[part] = {"dropout": _dropout, "envelope": _envelope, "load": _load}[part](args, log_dir)
+    return out

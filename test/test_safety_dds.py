@@ -1,0 +1,159 @@
+"""The executor under faults, over DDS (issue 13 items 3, 4, 6): executor and mock_hardware run
+as processes from the mock launch file on a flat floor; ``tools.safety`` plays the planner and
+records every command to the arm. The last test re-runs each scenario with one protection
+removed (a ``sitecustomize`` the processes import patches it out) and checks that the scenario's
+assertion then fails: the checks see what they claim to see.
+"""
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.tools import safety
+
+pytestmark = pytest.mark.dds
+FAST_DIAGNOSTICS = {"executor": {"diagnostics_period": 0.2}}
+# Scheduling allowance on top of the 2-control-period bound: the test machine is shared (2
+# cores, several suites at once: load averages above 20 seen); the README figures are the
+# bench's distributions.
+LOAD_SLACK_S = 0.15
+
+
+def _dropouts(probe, env, rng) -> list[dict]:
+    return [safety.dropout(probe, env, s, rng.uniform(0.0, 0.3)) for s in ("wrench", "pose")]
+
+
+def _dropout_ok(row, env) -> bool:
+    return (
+        row.get("latency_s") is not None
+        and row["latency_s"] <= 2 * env.control_period + LOAD_SLACK_S
+        and row["moving_after_stop"] == 0
+    )
+
+
+def test_sensor_dropout_stops_the_arm_and_aborts_without_evidence(tmp_path):
+    with safety.mock_floor(tmp_path, FAST_DIAGNOSTICS) as (probe, env, _):
+        rows = _dropouts(probe, env, np.random.default_rng(0))
+        final = probe.diagnostics()
+    for row, stream in zip(rows, ("wrench", "tool_pose"), strict=True):
+        assert _dropout_ok(row, env), row
+        assert row["outcome"] == "ABORTED" and row["segments"] == 0, row
+        assert f"sensor timeout: {stream}" in row["detail"]
+        # /diagnostics: ERROR naming the stale stream during the dropout
+        assert f"{stream} stale" in row["diagnostics_error"], row
+    # ... and after it: the rates, the counts, the last fault.
+    assert final["plans_aborted"] == "2" and final["plans_run"] == "2", final
+    assert "sensor timeout: tool_pose" in final["last_fault"], final
+    mock_rate = 200.0  # config/mock.yaml mock_hardware rate_hz; a loaded machine publishes less
+    for key in ("tool_pose_rate_hz", "wrench_rate_hz"):
+        assert 10.0 <= float(final[key]) <= 1.2 * mock_rate, final
+    assert 10.0 <= float(final["control_rate_hz"]) <= 1.2 / env.control_period
+
+
+def _envelope_failures(result) -> list:
+    """What went wrong in ``safety.envelope_scenarios`` (those run): [] when all held."""
+    failures = [row for row in result["refusals"] if not row["refused"]]
+    force, two = result["force_fault"], result["two_plans"]
+    if force and not (force["outcome"] == "ABORTED" and "above the limit" in force["detail"]):
+        failures.append(force)
+    if two and not (
+        two["first"] == "NO_CONTACT" and "refused: another plan is running" in two["second"]
+    ):
+        failures.append(two)
+    return failures + result["violations"]
+
+
+def test_no_command_leaves_the_envelope(tmp_path):
+    with safety.mock_floor(tmp_path, FAST_DIAGNOSTICS) as (probe, env, _):
+        result = safety.envelope_scenarios(probe, env)
+    assert len(result["refusals"]) == 7 and result["force_fault"] and result["two_plans"]
+    assert result["moving_commands"] > 100  # the check saw the arm move
+    failures = _envelope_failures(result)
+    assert failures == [], failures[:10]
+
+
+def _load(tmp_path):
+    with safety.mock_floor(tmp_path, FAST_DIAGNOSTICS, record_sensors=False, amplify=10) as (
+        probe, env, _,
+    ):  # fmt: skip
+        return safety.control_jitter(probe, env, burst_size=10), env
+
+
+def _load_ok(result, env) -> bool:
+    """The plan ran to its end (or, on a machine so loaded that the mock stalled for longer
+    than sensor_timeout, stopped for that reason), every other plan refused, the period kept."""
+    starved = result["outcome"] == "ABORTED" and "sensor timeout" in (result["detail"] or "")
+    return (
+        (result["outcome"] == "NO_CONTACT" or starved)
+        and result["commands"] >= 50
+        and result["burst_details"] == ["refused: another plan is running"]
+        and (result["diagnostics"]["plans_run"] == "1" or starved)  # (a burst plan may follow)
+        and result["interval_s"]["p50"] == pytest.approx(env.control_period, abs=2e-3)
+        and result["jitter_s"]["p99"] <= 2 * env.control_period + LOAD_SLACK_S
+    )
+
+
+def test_control_loop_keeps_its_period_under_10x_sensor_rate_and_plan_bursts(tmp_path):
+    result, env = _load(tmp_path)
+    assert result["burst_plans"] >= 40 and result["burst_reports"] >= 1, result
+    # The executor received 10x what the mock published, less what a loaded machine drops.
+    for stream, rate in result["executor_rate_hz"].items():
+        assert rate >= 3.0 * result["mock_rate_hz"], (stream, result)
+    assert _load_ok(result, env), result
+
+
+NOT_BUSY = (
+    "import tactile_dock_ros.nodes.executor_node as e\ne.ExecutorNode.busy = lambda s: False\n"
+)
+# Each protection, removed in the processes by a sitecustomize, and the scenario that must catch it.
+MUTATIONS = {
+    "workspace box": (
+        "import tactile_dock_ros.nodes.guarded as g\ng.Limits.inside = lambda self, p: True\n",
+        "target outside the workspace",
+    ),
+    "speed limit": (
+        "import dataclasses\nimport tactile_dock_ros.nodes.executor_node as e\n"
+        "_L = e.Limits\ne.Limits = lambda *a: dataclasses.replace(_L(*a), max_speed=1e3)\n",
+        "absurd speed (100 m/s)",
+    ),
+    "force limit": (
+        "import dataclasses\nimport tactile_dock_ros.nodes.executor_node as e\n"
+        "_L = e.Limits\ne.Limits = lambda *a: dataclasses.replace(_L(*a), max_force=1e3)\n",
+        "force above the limit",
+    ),
+    "episode gate": (
+        "import tactile_dock_ros.nodes.watchdog as w\n"
+        "w.EpisodeGate.admit = lambda self, e: (w.Admission.RUN, '')\n",
+        "plan of a superseded episode",
+    ),
+    "busy refusal": (
+        NOT_BUSY,
+        "two plans at once",
+    ),
+    "busy refusal under load": (
+        NOT_BUSY,
+        "load",
+    ),
+    "sensor timeout": (
+        "import numpy\nimport tactile_dock_ros.nodes.watchdog as w\n"
+        "w.StreamWatch.age = lambda self, now: 0.0 if self.last is not None else numpy.inf\n",
+        "dropout",
+    ),
+}
+
+
+@pytest.mark.parametrize("removed", MUTATIONS)
+def test_each_check_fails_when_its_protection_is_removed(removed, tmp_path, monkeypatch):
+    patch, scenario = MUTATIONS[removed]
+    (tmp_path / "sitecustomize.py").write_text(patch)
+    monkeypatch.setenv("PYTHONPATH", f"{tmp_path}:{__import__('os').environ['PYTHONPATH']}")
+    if scenario == "load":
+        result, env = _load(tmp_path / "run")
+        assert not _load_ok(result, env), result
+        return
+    with safety.mock_floor(tmp_path / "run", FAST_DIAGNOSTICS) as (probe, env, _):
+        if scenario == "dropout":
+            rows = [safety.dropout(probe, env, "wrench", 0.1)]
+            assert not _dropout_ok(rows[0], env), rows
+            return
+        result = safety.envelope_scenarios(probe, env, names=[scenario])
+    assert _envelope_failures(result), result  # the check catches the unprotected executor
