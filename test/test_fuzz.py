@@ -43,7 +43,8 @@ def test_every_malformed_message_is_dropped_by_every_subscriber(in_process):
 
 def test_stale_ids_leave_the_history_and_the_arm_alone(in_process):
     # Duplicated / out-of-order plan and episode ids, reports of other episodes: well formed,
-    # ignored by design (inference), and no plan is taken while the planner's episode is IDLE.
+    # ignored by design (inference), and no plan is taken while the planner's episode is IDLE
+    # (dropped, or refused with an ABORTED report: counted alike).
     assert in_process["inference"]["history_unchanged"]
     plans = in_process["executor"]["/plan"]
     assert plans["well_formed"] > 0 and plans["dropped"] == IN_PROCESS_MESSAGES

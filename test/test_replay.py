@@ -146,7 +146,7 @@ EXPECTED_QOS = {  # what the nodes publish with (nodes.qos); latched topics repl
     "/terrain_prior": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
     "/contact_history": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
     "/shape_samples": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
-    "/plan": {"durability": "volatile", "reliability": "reliable", "depth": 10},
+    "/plan": {"durability": "volatile", "reliability": "reliable", "depth": 100},
     "/execution_report": {"durability": "transient_local", "reliability": "reliable", "depth": 32},
 }
 

@@ -176,6 +176,9 @@ class ExecutorNode(Node):
             if key == self.plan_heard[0]:
                 self.plan_heard = (key, now_seconds(self))
             return
+        admission, why = self.gate.admit(plan.episode)
+        if admission is Admission.WAIT:  # not marked seen: a copy after the status may run
+            raise convert.MessageError(f"plan {plan.plan_id} of episode {plan.episode}: {why}")
         self.check_order(plan)
         self.seen_plans.add(key)
         if not plan.dock:
@@ -184,7 +187,6 @@ class ExecutorNode(Node):
         if self.busy():  # a second plan is refused, never preempts the running one
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
             return
-        admission, why = self.gate.admit(plan.episode)
         if admission is Admission.REFUSE:
             self.report(plan, Outcome.ABORTED, f"refused: {why}")
             return

@@ -195,13 +195,13 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
             _context(now_s),
             topic in FRAME_CHECKED,
         ):
-            before = node.malformed.dropped[topic]
+            before = node.malformed.dropped[topic], _refused(node)
             try:
                 subscription.callback(m.msg)
             except Exception as err:  # counted: the figure is that none escapes
                 errors[f"{m.kind}: {type(err).__name__}: {err}"[:200]] += 1
                 continue
-            dropped = node.malformed.dropped[topic] > before
+            dropped = (node.malformed.dropped[topic], _refused(node)) != before
             stats["malformed" if m.malformed else "well_formed"] += 1
             stats["dropped"] += dropped
             if m.malformed and not dropped:
@@ -210,6 +210,13 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
     if history is not None:
         out["history_unchanged"] = _same_history(history, node.history)
     return out
+
+
+def _refused(node) -> int:
+    """Plans the executor refused with an ABORTED report (a plan of an episode that is not
+    running, say): not used, like a dropped message, but answered."""
+    health = getattr(node, "health", None)
+    return health.counts["plans_refused"] if health is not None else 0
 
 
 def _same_history(a, b) -> bool:

@@ -35,6 +35,7 @@ from std_srvs.srv import SetBool
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import stamp_seconds
+from tactile_dock_ros.nodes.planner_node import RESEND_PERIOD
 from tactile_dock_ros.tools import bringup
 
 CONFIG = bringup.PACKAGE_ROOT / "config" / "mock.yaml"
@@ -133,6 +134,8 @@ class Probe(Node):
         self.drop_clients = {
             s: self.create_client(SetBool, f"/mock_hardware/drop_{s}") for s in STREAM_TOPICS
         }
+        self.unanswered: dict[int, DockingPlan] = {}  # plans resent until their report came
+        self.create_timer(RESEND_PERIOD, self.resend)
         self.spinner = SingleThreadedExecutor(context=context)
         self.spinner.add_node(self)
 
@@ -153,6 +156,13 @@ class Probe(Node):
 
     def on_report(self, msg: ExecutionReport) -> None:
         self.rec.reports.append(convert.report_from_msg(msg))
+        self.unanswered.pop(msg.plan_id, None)
+
+    def resend(self) -> None:
+        """Copies of the unanswered plans, as the planner sends them (the executor's producer
+        heartbeat: without them it stops the arm after ``producer_timeout``)."""
+        for msg in self.unanswered.values():
+            self.plan_pub.publish(msg)
 
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
@@ -215,12 +225,11 @@ class Probe(Node):
             False, 0.5, 0.5, 0, "safety probe",
             episode=self.episode if episode is None else episode,
         )  # fmt: skip
-        self.plan_pub.publish(
-            convert.plan_to_msg(
-                command,
-                convert.Header(stamp=self.get_clock().now().to_msg(), frame_id="dock_plane"),
-            )
+        msg = convert.plan_to_msg(
+            command, convert.Header(stamp=self.get_clock().now().to_msg(), frame_id="dock_plane")
         )
+        self.unanswered[plan_id] = msg
+        self.plan_pub.publish(msg)
         return plan_id
 
     def status(self, episode: int, state: str) -> None:
