@@ -320,6 +320,7 @@ def test_problem2_means_match_rejection_on_the_known_bad_seeds(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # 40 Gibbs runs of 2000 sweeps: ~1 min alone, far more under load
 @pytest.mark.parametrize(
     ("method", "descent_only"), [("hmc", False), ("hmc", True), ("gibbs", False)]
 )

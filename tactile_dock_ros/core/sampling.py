@@ -509,9 +509,10 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
     2. exact seeds (without warm rows): prior draws that satisfy the history are posterior
        draws, so chains seeded by them are in each pocket with its posterior probability
        (``_exact_seeds``: a bounded budget, skipped when the first batch has no hit);
-    3. the remaining chains get one descent each (up to SEED_DESCENTS per restart; beyond that
-       the descent seeds are shared round-robin): prior draws projected onto the contacts,
-       then random descent, which stops once half of them are feasible. A feasible descent
+    3. the remaining chains get one descent each: prior draws projected onto the contacts,
+       then random descent. Beyond SEED_DESCENTS remaining chains, SEED_DESCENTS descents run
+       per restart, stop once half of them are feasible, and the chains share the descent
+       seeds round-robin (descents are the costly part of seeding). A feasible descent
        seed far less likely under the prior than the typical seed (``_typical``; exact seeds
        count as typical) is discarded; descents restart until SEED_MIN_DISTINCT seeds are
        kept, so that one pocket seed holds less than half of the chains and the check after
@@ -543,7 +544,8 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
     for attempt in range(restarts):
         start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
         z0 = _contact_projection(shape, history, start)
-        z, count = random_descent(system, z0, rng, max_iters, enough=max(1, tries // 2))
+        enough = tries if tries == chains - len(exact) else max(1, tries // 2)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
@@ -712,13 +714,16 @@ def sample_posterior(
     (random walk, step adapted during burn-in), "rejection" (i.i.d. prior draws, at most
     ``max_draws``; may return fewer samples, even none, if the posterior is too unlikely).
 
-    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from seeds
-    found by random descent of f_H. If ``seed_restarts`` descents
-    all fail, the history is taken as inconsistent (sensor error): the observations violated by
-    the best state found are dropped (``dropped``) and sampling continues without them. Every
-    returned sample satisfies every kept observation under the exact geometric test. An empty
-    history returns exact prior draws. ``max_steps`` (default 50 n / chains + 1000) bounds the
-    MCMC steps per chain; fewer samples are returned if verification keeps failing.
+    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from prior
+    draws that fit the history or from seeds found by random descent of f_H (``_seed``); after
+    the run, chains trapped away from the others are re-seeded and rerun, and split R-hat is
+    checked (``convergence``, logged as a warning when the chains disagree). If
+    ``seed_restarts`` descents all fail, the history is taken as inconsistent (sensor error):
+    the observations violated by the best state found are dropped (``dropped``) and sampling
+    continues without them. Every returned sample satisfies every kept observation under the
+    exact geometric test. An empty history returns exact prior draws. ``max_steps`` (default
+    50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
+    verification keeps failing.
 
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
     observations, seeds the chains: its rows consistent with the history (the previous
