@@ -186,6 +186,11 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
     assert history_consistent(False, warm.vertices, history, problem.friction).all()
     again = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
     assert np.array_equal(warm.z, again.z)
+    # two consistent rows: one chain each, descents seed the rest (no seed holds half)
+    few = np.vstack([before.z[consistent][:2], before.z[~consistent][:4]])
+    out = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=few)
+    assert out.info["warm_seeds"] == 2 and out.info["distinct_seeds"] >= sampling.SEED_MIN_DISTINCT
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
     # no row consistent: descent starts from them, default burn-in
     bad = before.z[~consistent][:3]
     out = sample_posterior(shape, history, 30, np.random.default_rng(6), init_z=bad)

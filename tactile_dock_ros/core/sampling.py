@@ -40,7 +40,7 @@ MCMC_METHODS = ("hmc", "gibbs", "mh")
 NODE_METHODS = ("hmc", "gibbs", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
-SEED_MIN_DISTINCT = 3  # restart descents until this many seeds are kept (one pocket: < 1/2)
+SEED_MIN_DISTINCT = 3  # distinct seeds wanted (restart descents): one pocket holds < 1/2
 SEED_PRIOR_BATCH = 128  # prior draws tried as exact seeds before anything else
 SEED_PRIOR_DRAWS = 32  # prior draws per chain at most for exact seeds (acceptance >~ 3 %)
 SEED_Z2_MARGIN = 4.0  # descent seeds with |z|^2 this many chi-square std above typical: dropped
@@ -504,19 +504,20 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
     HMC never leaves a pocket, so a longer burn-in does not help):
     1. warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
        history are used directly (distinct ones first, shared round-robin if fewer than
-       ``chains``); if none does, the first descent starts from some of them instead of prior
+       ``chains`` but at least SEED_MIN_DISTINCT; with fewer, they seed one chain each and
+       descents seed the rest); the first descent starts from the other rows instead of prior
        draws (they already satisfy most observations);
-    2. exact seeds (without warm rows): prior draws that satisfy the history are posterior
+    2. exact seeds (without ``init_z`` rows): prior draws that satisfy the history are posterior
        draws, so chains seeded by them are in each pocket with its posterior probability
        (``_exact_seeds``: a bounded budget, skipped when the first batch has no hit);
     3. the remaining chains get one descent each: prior draws projected onto the contacts,
        then random descent. Beyond SEED_DESCENTS remaining chains, SEED_DESCENTS descents run
        per restart, stop once half of them are feasible, and the chains share the descent
        seeds round-robin (descents are the costly part of seeding). A feasible descent
-       seed far less likely under the prior than the typical seed (``_typical``; exact seeds
-       count as typical) is discarded; descents restart until SEED_MIN_DISTINCT seeds are
-       kept, so that one pocket seed holds less than half of the chains and the check after
-       the run can tell which chains are trapped.
+       seed far less likely under the prior than the typical seed (``_typical``; exact and
+       warm seeds count as typical) is discarded; descents restart until SEED_MIN_DISTINCT
+       seeds (with the warm / exact ones) are kept, so that one pocket seed holds less than
+       half of the chains and the check after the run can tell which chains are trapped.
     Pocket chains that get past this are caught after the run (``convergence``) and re-seeded.
 
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
@@ -525,26 +526,27 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
     system = HistoryConstraints(shape, history, pairs)
     none = np.zeros(chains, dtype=bool)
     warm = np.zeros((0, shape.n_basis))
+    pool = np.zeros((0, shape.n_basis))  # warm or exact seeds, one chain each
     if init_z is not None and len(init_z):
-        good, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
-        if len(good):
-            z = good[np.arange(chains) % len(good)]
-            return _Seeds(z, system, none, warm=len(good), distinct=len(good))
-    exact = np.zeros((0, shape.n_basis))
-    if not len(warm):  # rows of the previous posterior start far closer than prior draws
-        exact, _ = _exact_seeds(shape, history, system, chains, rng)
-    if len(exact) == chains:
-        return _Seeds(exact, system, ~none, distinct=chains)
+        pool, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
+        if len(pool) >= min(chains, SEED_MIN_DISTINCT):
+            z = pool[np.arange(chains) % len(pool)]
+            return _Seeds(z, system, none, warm=len(pool), distinct=len(pool))
+    exact = init_z is None or not len(init_z)
+    if exact:  # rows of the previous posterior start far closer than prior draws
+        pool, _ = _exact_seeds(shape, history, system, chains, rng)
+    if len(pool) == chains:
+        return _Seeds(pool, system, ~none, distinct=chains)
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
-    tries = min(chains - len(exact), SEED_DESCENTS)
+    tries = min(chains - len(pool), SEED_DESCENTS)
     found = np.zeros((0, shape.n_basis))  # feasible descent seeds so far
     good = found
     for attempt in range(restarts):
         start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
         z0 = _contact_projection(shape, history, start)
-        enough = tries if tries == chains - len(exact) else max(1, tries // 2)
+        enough = tries if tries == chains - len(pool) else max(1, tries // 2)
         z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
@@ -555,8 +557,8 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             system = HistoryConstraints(shape, history, pairs)
         found = np.vstack([found, z[ok]])
         if len(found):
-            good = found[_typical(found, np.vstack([exact, found]))]
-        if len(good) >= min(SEED_MIN_DISTINCT, tries):
+            good = found[_typical(found, np.vstack([pool, found]))]
+        if len(good) and len(pool) + len(good) >= min(SEED_MIN_DISTINCT, chains):
             break
         if not ok.any():
             full_count = np.sum(
@@ -566,18 +568,20 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             )
             if full_count.min() < best_count:
                 best_count, best_z = full_count.min(), z[np.argmin(full_count)]
+    warm_used = 0 if exact else len(pool)
     if len(good):
-        fill = good[np.arange(chains - len(exact)) % len(good)]
+        fill = good[np.arange(chains - len(pool)) % len(good)]
         return _Seeds(
-            np.vstack([exact, fill]),
+            np.vstack([pool, fill]),
             system,
-            np.arange(chains) < len(exact),
-            distinct=len(exact) + len(good),
+            (np.arange(chains) < len(pool)) & exact,
+            warm=warm_used,
+            distinct=len(pool) + len(good),
             screened=len(found) - len(good),
         )
-    if len(exact):  # descent failed, but some chains have exact seeds: share those
-        z = exact[np.arange(chains) % len(exact)]
-        return _Seeds(z, system, ~none, distinct=len(exact))
+    if len(pool):  # descent failed, but some chains have exact or warm seeds: share those
+        z = pool[np.arange(chains) % len(pool)]
+        return _Seeds(z, system, none | exact, warm=warm_used, distinct=len(pool))
     return _Seeds(None, None, none, best_z=best_z)
 
 
