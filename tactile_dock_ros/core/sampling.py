@@ -36,7 +36,7 @@ LOG = logging.getLogger(__name__)
 METHODS = ("hmc", "gibbs", "mh", "rejection")  # every sampler (the benchmark compares them)
 MCMC_METHODS = ("hmc", "gibbs", "mh")
 # what the nodes offer: MH is a benchmark baseline only (its chains barely move: split R-hat
-# ~4 on Fig. 9 problem 2, std 0.35-0.63 of the posterior's on problem 3 with descent seeds)
+# ~4 on Fig. 9 problem 2; std 0.35-0.63 of the posterior's on problem 3 in the issue-12 audit)
 NODE_METHODS = ("hmc", "gibbs", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
