@@ -295,14 +295,14 @@ def _no_exact_seeds(shape, *args):
     return np.zeros((0, shape.n_basis)), 0
 
 
-def _check_seeds(reference, method, seeds, descent_only, monkeypatch):
+def _check_seeds(reference, method, seeds, descent_only, monkeypatch, n=2000):
     problem, history, mean, std = reference
     if descent_only:  # the path of hard problems (three_ledges): descent, screening, re-seeding
         monkeypatch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
     errors = {}
     for seed in seeds:
-        out = sample_posterior(problem.prior, history, 2000, np.random.default_rng(seed), method)
-        assert len(out.z) == 2000 and out.convergence.trapped == 0
+        out = sample_posterior(problem.prior, history, n, np.random.default_rng(seed), method)
+        assert len(out.z) == n and out.convergence.trapped == 0
         errors[seed] = _mean_error(out, mean, std)
     assert max(errors.values()) < MEAN_TOL, errors
 
@@ -325,14 +325,17 @@ def test_problem2_means_match_rejection_on_the_known_bad_seeds(
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1800)  # 40 Gibbs runs of 2000 sweeps: ~1 min alone, far more under load
+@pytest.mark.timeout(3000)  # 40 Gibbs runs of 4000 sweeps: ~2 min alone, far more under load
 @pytest.mark.parametrize(
-    ("method", "descent_only"), [("hmc", False), ("hmc", True), ("gibbs", False)]
+    ("method", "descent_only", "n"),
+    [("hmc", False, 2000), ("hmc", True, 2000), ("gibbs", False, 4000)],
 )
 def test_problem2_means_match_rejection_over_40_seeds(
-    problem2_reference, method, descent_only, monkeypatch
+    problem2_reference, method, descent_only, n, monkeypatch
 ):
-    _check_seeds(problem2_reference, method, range(40), descent_only, monkeypatch)
+    """Gibbs gets 4000 sweeps: at 2000 its Monte Carlo error alone reaches 0.325 std on one of
+    the 40 seeds (no chain trapped; slowly mixing chains)."""
+    _check_seeds(problem2_reference, method, range(40), descent_only, monkeypatch, n)
 
 
 def _pocket_state(problem, history, mean, std):
