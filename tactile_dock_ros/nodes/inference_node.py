@@ -33,7 +33,7 @@ from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
 from tactile_dock_ros.core.history import History
-from tactile_dock_ros.core.sampling import sample_posterior
+from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 from tactile_dock_ros.nodes import convert, journal, markers, qos
 from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
@@ -41,7 +41,12 @@ from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
     PLANE_FRAME_ID,
-    Param("method", "hmc", "posterior sampler", choices=("hmc", "gibbs", "mh", "rejection")),
+    Param(
+        "method",
+        "hmc",
+        "posterior sampler (not mh: a benchmark baseline whose chains barely move)",
+        choices=NODE_METHODS,
+    ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param("marker_samples", 20, "samples drawn as RViz line strips", "", 0, 1000),
@@ -246,8 +251,16 @@ class InferenceNode(Node):
         self.get_logger().info(
             f"episode {episode} cycle {cycle}: history {len(history)} segments, "
             f"{len(posterior.vertices)} {posterior.method} samples, ESS {posterior.ess:.1f}, "
+            f"R-hat {posterior.convergence.rhat:.3f}, "
             f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
         )
+        check = posterior.convergence
+        if check.reseeded or not check.converged:
+            self.get_logger().warning(
+                f"posterior chains disagreed: {check.reseeded} trapped chains re-seeded in "
+                f"{check.rounds} rounds, {check.trapped} still trapped, split R-hat "
+                f"{check.rhat:.3f} (limit {check.rhat_limit:.3f})"
+            )
 
 
 def main(args: list[str] | None = None) -> int:
