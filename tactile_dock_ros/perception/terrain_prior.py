@@ -7,11 +7,11 @@ Columns of A, in this order:
   camera (c_z != 0) turns the tilts rx, ry into in-plane translations ``(0, c_z rx)``,
   ``(-c_z ry, 0)``; tz moves the extruded terrain along itself and has no in-plane effect.
   The block is compressed by an SVD to its non-zero directions (same A A^T).
-- depth noise: one column per visible vertex along its viewing ray, std = the pixel depth std
-  sigma(z) scaled to the in-plane range (``sigma(z) |p - c|_xy / z``). Decision: the per-pixel
-  std is used even though a vertex is a median of several pixels, which keeps the band honest
-  about resampling and mixed pixels. Hidden vertices carry the linear interpolation of their
-  stretch's two end columns, so a hidden stretch moves with the ends it hangs from.
+- surface: the true surface's deviation from the slice (``surface``): by default a smoothed
+  mean and the correlated posterior columns of each visible run (noise of a median of N pixels,
+  a piecewise smooth surface prior); ``depth_model: independent`` gives the original one
+  column per visible vertex along its ray with one pixel's std. Hidden vertices interpolate
+  their stretch's end rows.
 - occlusion: per hidden stretch, the PCA columns of the constrained Brownian bridge
   (``bridge.occlusion_columns``); its sample mean replaces the chord placeholders in mu.
 """
@@ -25,8 +25,9 @@ import numpy as np
 from ..core import prior as core_prior
 from ..core.shape import GaussianShape
 from .bridge import Sampler, occlusion_columns, sample_truncated_gaussian
-from .config import DepthNoise, Extrinsic, OcclusionParams, PerceptionConfig
+from .config import DepthNoise, Extrinsic, OcclusionParams, PerceptionConfig, SurfaceParams
 from .slicing import TerrainSlice, extract_slice
+from .surface import surface_columns
 
 
 def calibration_jacobian(vertices: np.ndarray, camera_centre: np.ndarray) -> np.ndarray:
@@ -55,30 +56,6 @@ def calibration_columns(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarra
     return u[:, keep] * sv[keep]
 
 
-def camera_depths(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
-    """(n,) optical-axis depth (metres) of plane points (x, y, 0) in the nominal camera."""
-    rel = np.column_stack([vertices, np.zeros(len(vertices))]) - extrinsic.camera_centre
-    return rel @ extrinsic.rotation[:, 2]
-
-
-def depth_noise_columns(
-    terrain: TerrainSlice, vertices: np.ndarray, extrinsic: Extrinsic, noise: DepthNoise
-) -> np.ndarray:
-    """(2n, n_visible) ray-noise columns; hidden rows interpolate their stretch's end rows."""
-    visible = np.flatnonzero(~terrain.hidden)
-    v = vertices[visible]
-    z = np.maximum(camera_depths(v, extrinsic), 1e-6)
-    sigma = noise.sigma(z) * np.linalg.norm(v - terrain.camera_xy, axis=1) / z
-    rows = core_prior.ray_columns(v, terrain.camera_xy, sigma).reshape(len(visible), 2, -1)
-    cols = np.zeros((len(vertices), 2, len(visible)))
-    cols[visible] = rows
-    for first, last in terrain.stretches:
-        inner = np.arange(first + 1, last)
-        lam = ((inner - first) / (last - first))[:, None, None]
-        cols[inner] = (1 - lam) * cols[first] + lam * cols[last]
-    return cols.reshape(2 * len(vertices), -1)
-
-
 def build_prior(
     terrain: TerrainSlice,
     extrinsic: Extrinsic,
@@ -87,9 +64,10 @@ def build_prior(
     friction: float,
     rng: np.random.Generator,
     sampler: Sampler = sample_truncated_gaussian,
+    surface: SurfaceParams | None = None,
 ) -> GaussianShape:
-    """GaussianShape prior of a slice (columns: calibration, depth noise, occlusion)."""
-    verts = terrain.vertices.copy()
+    """GaussianShape prior of a slice (columns: calibration, surface, occlusion)."""
+    verts, surface_block = surface_columns(terrain, extrinsic, noise, surface or SurfaceParams())
     n = len(verts)
     blocks = []
     for first, last in terrain.stretches:
@@ -112,7 +90,7 @@ def build_prior(
     basis = np.hstack(
         [
             calibration_columns(verts, extrinsic),
-            depth_noise_columns(terrain, verts, extrinsic, noise),
+            surface_block,
             *blocks,
         ]
     )
@@ -140,5 +118,13 @@ def perceive(
     terrain = extract_slice(
         depth, K, config.extrinsic, config.slice, config.occlusion.max_hidden_vertices
     )
-    prior = build_prior(terrain, config.extrinsic, noise, config.occlusion, config.friction, rng)
+    prior = build_prior(
+        terrain,
+        config.extrinsic,
+        noise,
+        config.occlusion,
+        config.friction,
+        rng,
+        surface=config.surface,
+    )
     return Perception(terrain, prior)
