@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.prior import vertex_normals
 from ..core.shape import GaussianShape
-from .geometry import cross2, resample_polyline
+from .geometry import cross2, perturb_pose, resample_polyline
 
 _EPS = 1e-9
 
@@ -115,38 +115,72 @@ def normal_deviations(
 SCORE_NUGGET_M = 0.0005  # half a 1 mm depth step: gives rank-deficient priors a density
 
 
-def deviation_score(
-    prior: GaussianShape,
-    terrain: np.ndarray,
-    rng: np.random.Generator,
-    samples: int = 1000,
-    max_distance_m: float = 0.1,
-) -> dict:
-    """Proper scores of the truth's normal deviations d (``normal_deviations``) at the mean.
+FACE_TURN_RAD = np.deg2rad(15.0)
 
-    The prior's predictive of d is ``N(0, S)``, ``S = N A A^T N^T + nugget^2 I`` (N picks each
-    vertex's component along its mean normal, rows with no truth crossing dropped). Returns the
-    Gaussian NLL per vertex ``(log det(2 pi S) + d^T S^-1 d) / (2 k)`` (nats) and the energy
-    score ``E|X - d| - E|X - X'| / 2`` (metres) from ``samples`` draws of X (pairs split in half).
+
+def face_vertices(mean: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """(n,) bool: visible vertices inside a face, where the normal deviation is linear.
+
+    Excluded: hidden vertices and their visible neighbours, the polyline's ends, and vertices
+    where the mean turns by more than ``FACE_TURN_RAD`` (at a corner a small tangential shift
+    of the truth moves its crossing with the normal line onto the other face).
     """
-    mean = prior.mean_vertices
-    normals = vertex_normals(mean)
-    d = normal_deviations(mean, normals, terrain, max_distance_m)
-    ok = np.isfinite(d)
-    A = prior.basis.reshape(prior.n_vertices, 2, -1)
-    B = np.einsum("ni,nik->nk", normals, A)[ok]
-    d = d[ok]
-    k = len(d)
-    S = B @ B.T + SCORE_NUGGET_M**2 * np.eye(k)
+    e = np.diff(mean, axis=0)
+    ang = np.arctan2(e[:, 1], e[:, 0])
+    turn = np.abs((np.diff(ang) + np.pi) % (2 * np.pi) - np.pi)
+    keep = np.zeros(len(mean), bool)
+    keep[1:-1] = turn <= FACE_TURN_RAD
+    near_hidden = hidden | np.r_[hidden[1:], False] | np.r_[False, hidden[:-1]]
+    return keep & ~near_hidden
+
+
+def matched_truth(
+    mean: np.ndarray,
+    terrain: np.ndarray,
+    T_plane_camera: np.ndarray,
+    calibration_error: np.ndarray,
+    max_distance_m: float = 0.1,
+) -> np.ndarray:
+    """(n, 2) the true terrain point matched to each mean vertex; NaN rows when none.
+
+    The vertex is first moved where the camera's ray really went (its believed position under
+    the true pose ``perturb_pose(T, calibration_error)``, in-plane part), then along its moved
+    normal onto the truth (``normal_deviations``): the rigid motion of a calibration error is
+    matched exactly, and only the surface's deviation is measured along the normal.
+    """
+    T = np.asarray(T_plane_camera, float)
+    M = perturb_pose(T, calibration_error) @ np.linalg.inv(T)
+    moved = (np.column_stack([mean, np.zeros(len(mean)), np.ones(len(mean))]) @ M.T)[:, :2]
+    normals = vertex_normals(mean) @ M[:2, :2].T
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    t = normal_deviations(moved, normals, terrain, max_distance_m)
+    return moved + t[:, None] * normals
+
+
+def deviation_score(
+    prior: GaussianShape, truth: np.ndarray, rng: np.random.Generator, samples: int = 1000
+) -> dict:
+    """Proper scores of the matched truth ``truth`` (n, 2), NaN rows skipped.
+
+    The prior's predictive of the stacked matched points is ``N(mu, A A^T + nugget^2 I)``.
+    Returns the Gaussian NLL per vertex ``(log det(2 pi S) + r^T S^-1 r) / (2 k)`` (nats, k
+    scored vertices, r = truth - mu) and the energy score ``E|X - y| - E|X - X'| / 2``
+    (metres) from ``samples`` draws of X (pairs split in half).
+    """
+    ok = np.all(np.isfinite(truth), axis=1)
+    r = (truth - prior.mean_vertices)[ok].ravel()
+    B = prior.basis.reshape(prior.n_vertices, 2, -1)[ok].reshape(len(r), -1)
+    k = int(ok.sum())
+    S = B @ B.T + SCORE_NUGGET_M**2 * np.eye(len(r))
     L = np.linalg.cholesky(S)
-    w = np.linalg.solve(L, d)
-    nll = (k * np.log(2 * np.pi) + 2 * np.sum(np.log(np.diag(L))) + w @ w) / (2 * k)
-    X = rng.standard_normal((samples, k)) @ L.T
+    w = np.linalg.solve(L, r)
+    nll = (len(r) * np.log(2 * np.pi) + 2 * np.sum(np.log(np.diag(L))) + w @ w) / (2 * k)
+    X = rng.standard_normal((samples, len(r))) @ L.T
     half = samples // 2
-    energy = np.mean(np.linalg.norm(X - d, axis=1)) - 0.5 * np.mean(
+    energy = np.mean(np.linalg.norm(X - r, axis=1)) - 0.5 * np.mean(
         np.linalg.norm(X[:half] - X[half : 2 * half], axis=1)
     )
-    return {"nll_per_vertex": float(nll), "energy_m": float(energy), "vertices": int(k)}
+    return {"nll_per_vertex": float(nll), "energy_m": float(energy), "vertices": k}
 
 
 def edge_angle_stats(prior: GaussianShape) -> tuple[np.ndarray, np.ndarray]:

@@ -99,7 +99,14 @@ def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_w
 
 
 def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: float):
-    """Per-bearing-bin median points (k, 2), ordered by decreasing bearing, and pixel counts."""
+    """Per-bearing-bin median points (k, 2), ordered by decreasing bearing, and pixel counts.
+
+    Each bin's point lies at the bin's mean bearing; its range is the median of the pixels'
+    ranges moved to that bearing along the bin's least-squares range-vs-bearing slope. On a
+    surface slanted to the rays the range changes across the bin by more than the depth noise,
+    and the plain median range, paired with the mean bearing, would be off the surface by a
+    bias that no pixel count averages away.
+    """
     rel = points - camera_xy
     ref = rel.mean(axis=0)
     ref = ref / max(np.linalg.norm(ref), 1e-12)
@@ -107,12 +114,19 @@ def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: fl
     rng = np.linalg.norm(rel, axis=1)
     bin_width = spacing_m / (2.0 * max(np.median(rng), 1e-6))
     bins = np.floor(bearing / bin_width).astype(np.int64)
-    order = np.lexsort((rng, -bins))  # decreasing bearing, increasing range inside a bin
+    order = np.argsort(-bins, kind="stable")  # decreasing bearing
     bins, rng, bearing = bins[order], rng[order], bearing[order]
     starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
     counts = np.diff(np.r_[starts, bins.size])
-    med_range = rng[starts + (counts - 1) // 2]
+    member = np.repeat(np.arange(len(starts)), counts)
     mean_bearing = np.add.reduceat(bearing, starts) / counts
+    d_bearing = bearing - mean_bearing[member]
+    d_range = rng - (np.add.reduceat(rng, starts) / counts)[member]
+    spread = np.add.reduceat(d_bearing**2, starts)
+    slope = np.add.reduceat(d_bearing * d_range, starts) / np.maximum(spread, 1e-300)
+    at_mean = rng - np.where(spread > 0, slope, 0.0)[member] * d_bearing
+    at_mean = at_mean[np.lexsort((at_mean, member))]  # sorted inside each bin
+    med_range = at_mean[starts + (counts - 1) // 2]
     c, s = np.cos(mean_bearing), np.sin(mean_bearing)
     dirs = np.stack([c * ref[0] - s * ref[1], s * ref[0] + c * ref[1]], axis=1)
     return camera_xy + med_range[:, None] * dirs, counts

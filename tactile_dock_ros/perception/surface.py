@@ -20,7 +20,8 @@ angle is uncertain by tens of degrees and evidence on one edge says nothing abou
    A run's end next to a hidden stretch sits at a depth jump: its bins mix pixels of the near
    and the far surface (mixed pixels), and the far end of the jump is where a line of sight
    grazing the occluder lands, which moves with any viewpoint error; such an end carries half
-   a vertex spacing of std (the median of a mixed bin can fall anywhere in it).
+   a vertex spacing of std (the median of a mixed bin can fall anywhere in it), and the
+   prior lets the surface turn freely next to it (the near end is the occluder's corner).
 2. Surface prior: a piecewise smooth curve. The true second difference at vertex i along its
    normal (``h`` times the surface's turn there) is ``N(0, q_i)`` with
    ``q_i = (h bend_sigma_rad)^2 + e_i^2``: faces bend by ``bend_sigma_rad`` per vertex, and
@@ -114,6 +115,7 @@ def smooth_run(
         excess = np.maximum(np.abs(c) - surface.corner_threshold * sd_c, 0.0)
         s2[1:-1] += (excess / 4) ** 2
         q = (spacing_m * surface.bend_sigma_rad) ** 2 + excess**2
+        q[[0, -1]] += np.asarray(jump_ends, float) * spacing_m**2  # the occluder's corner
         D2 = np.zeros((r - 2, r))
         idx = np.arange(r - 2)
         D2[idx, idx], D2[idx, idx + 1], D2[idx, idx + 2] = 1.0, -2.0, 1.0

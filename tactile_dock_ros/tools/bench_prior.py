@@ -40,6 +40,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--per-problem", type=int, default=20, help="truths per problem")
     parser.add_argument("--config", type=Path, default=MOCK_CONFIG)
     parser.add_argument("--encoding", default="16UC1", choices=("16UC1", "32FC1"))
+    parser.add_argument(
+        "--calibration-scale",
+        type=float,
+        default=1.0,
+        help="scale of the drawn calibration error (0: a perfectly calibrated camera)",
+    )
 
 
 def mock_intrinsics(width: int = IMAGE[0], height: int = IMAGE[1], focal_px: float = FOCAL_PX):
@@ -59,10 +65,12 @@ def terrains(n_random: int, per_problem: int, seed: int):
             yield f"{name}_{i}", problem.sample_ground_truth(rng)
 
 
-def score_terrain(truth, config: PerceptionConfig, K, encoding: str, seed: int) -> dict | None:
-    """Both models' scores on one terrain (None when the camera cannot make a prior)."""
+def score_terrain(
+    truth, config: PerceptionConfig, K, encoding: str, seed: int, calibration_scale: float = 1.0
+) -> dict:
+    """Both models' scores on one terrain ({"error": ...} when the camera makes no prior)."""
     rng = np.random.default_rng(seed)
-    error = rng.multivariate_normal(np.zeros(6), config.extrinsic.covariance)
+    error = calibration_scale * rng.multivariate_normal(np.zeros(6), config.extrinsic.covariance)
     depth = render_depth(
         truth, K, config.extrinsic.T_plane_camera, IMAGE, rng, config.depth_noise, error
     )
@@ -78,11 +86,21 @@ def score_terrain(truth, config: PerceptionConfig, K, encoding: str, seed: int) 
             return {"error": str(err)}
         prior = result.prior
         frac, count = evaluation.coverage(prior, truth, result.slice.camera_xy, COVERAGE_SPACING_M)
-        score = evaluation.deviation_score(prior, truth, np.random.default_rng(seed + 2))
+        matched = evaluation.matched_truth(
+            prior.mean_vertices, truth, config.extrinsic.T_plane_camera, error
+        )
+        matched[result.slice.hidden] = np.nan  # hidden vertices: the shared occlusion model
+        score = evaluation.deviation_score(prior, matched, np.random.default_rng(seed + 2))
+        pts = evaluation.truth_points(truth, COVERAGE_SPACING_M)
+        pts = pts[evaluation.in_view(pts, result.slice.camera_xy, prior.mean_vertices)]
+        seen = evaluation.visible_from(truth, result.slice.camera_xy, pts)
+        inside = evaluation.band_distance(prior, pts) <= 2.0
         std, corr = evaluation.edge_angle_stats(prior)
         out[model] = {
             "covered": frac * count,
             "points": count,
+            "covered_visible": int(np.sum(inside & seen)),
+            "points_visible": int(np.sum(seen)),
             **score,
             "columns": int(prior.n_basis),
             "vertices": int(prior.n_vertices),
@@ -97,6 +115,8 @@ def summarize(rows: list[dict], model: str, kinds: list[str]) -> dict:
     return {
         "terrains": len(sel),
         "coverage_2sigma": sum(s["covered"] for s in sel) / max(sum(s["points"] for s in sel), 1),
+        "coverage_2sigma_visible": sum(s["covered_visible"] for s in sel)
+        / max(sum(s["points_visible"] for s in sel), 1),
         "mean_nll_per_vertex": float(np.mean([s["nll_per_vertex"] for s in sel])),
         "mean_energy_m": float(np.mean([s["energy_m"] for s in sel])),
         "median_columns": float(np.median([s["columns"] for s in sel])),
@@ -114,15 +134,17 @@ def run(args) -> dict:
     K = mock_intrinsics()
     rows, failed = [], []
     for i, (label, truth) in enumerate(terrains(args.random, args.per_problem, args.seed)):
-        out = score_terrain(truth, config, K, args.encoding, 1000 * args.seed + 7 * i)
-        if out is None or "error" in out:
-            failed.append({"terrain": label, "error": out and out["error"]})
+        seed = 1000 * args.seed + 7 * i
+        out = score_terrain(truth, config, K, args.encoding, seed, args.calibration_scale)
+        if "error" in out:
+            failed.append({"terrain": label, "error": out["error"]})
             continue
         rows.append({"terrain": label, "kind": label.rsplit("_", 1)[0], **out})
     kinds = sorted({r["kind"] for r in rows})
     groups = {"all": kinds, **{k: [k] for k in kinds}}
     summary = {}
-    head = f"{'terrains':<14}{'n':>4}  {'coverage':>17}  {'NLL/vertex':>15}  {'energy mm':>13}"
+    head = f"{'terrains':<14}{'n':>4}  {'coverage':>17}  {'cov visible':>15}  {'NLL/vertex':>15}"
+    head += f"  {'energy mm':>13}"
     print(head + f"  {'columns':>9}  {'edge angle std':>15}  {'adj corr':>11}   (old / new)")
     for group, members in groups.items():
         old, new = (summarize(rows, m, members) for m in ("independent", "correlated"))
@@ -145,7 +167,9 @@ def run(args) -> dict:
             "fraction_terrains_nll_better": float(better_nll),
         }
         print(
-            f"{group:<14}{old['terrains']:>4}  {old['coverage_2sigma']:7.3f} / {new['coverage_2sigma']:.3f}"
+            f"{group:<14}{old['terrains']:>4}"
+            f"  {old['coverage_2sigma']:7.3f} / {new['coverage_2sigma']:.3f}"
+            f"  {old['coverage_2sigma_visible']:5.3f} / {new['coverage_2sigma_visible']:.3f}"
             f"  {old['mean_nll_per_vertex']:6.2f} / {new['mean_nll_per_vertex']:6.2f}"
             f"  {1e3 * old['mean_energy_m']:5.2f} / {1e3 * new['mean_energy_m']:5.2f}"
             f"  {old['median_columns']:4.0f} / {new['median_columns']:<4.0f}"
@@ -158,6 +182,7 @@ def run(args) -> dict:
         "image": list(IMAGE),
         "focal_px": FOCAL_PX,
         "encoding": args.encoding,
+        "calibration_scale": args.calibration_scale,
         "target_coverage": list(TARGET_COVERAGE),
         "summary": summary,
         "failed": failed,
