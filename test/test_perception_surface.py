@@ -112,7 +112,9 @@ def test_matched_truth_undoes_the_calibration_error():
     wall = np.array([[0.0, -1.0], [0.0, 2.0]])
     mean = np.stack([np.full(5, 0.002), np.linspace(0.0, 0.4, 5)], axis=1)
     error = np.r_[0.01, -0.01, 0.0, 0.0, 0.0, 0.02]
-    matched = evaluation.matched_truth(mean, wall, CONFIG.extrinsic.T_plane_camera, error)
+    matched = evaluation.matched_truth(
+        mean, np.zeros(5, bool), wall, CONFIG.extrinsic.T_plane_camera, error
+    )
     np.testing.assert_allclose(matched[:, 0], 0.0, atol=1e-12)
     assert np.all(np.abs(matched[:, 1] - mean[:, 1]) > 0.005)  # the rigid part is kept
 

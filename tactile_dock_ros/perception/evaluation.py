@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.prior import vertex_normals
 from ..core.shape import GaussianShape
 from .geometry import cross2, perturb_pose, resample_polyline
+from .surface import run_normals
 
 _EPS = 1e-9
 
@@ -115,27 +115,9 @@ def normal_deviations(
 SCORE_NUGGET_M = 0.0005  # half a 1 mm depth step: gives rank-deficient priors a density
 
 
-FACE_TURN_RAD = np.deg2rad(15.0)
-
-
-def face_vertices(mean: np.ndarray, hidden: np.ndarray) -> np.ndarray:
-    """(n,) bool: visible vertices inside a face, where the normal deviation is linear.
-
-    Excluded: hidden vertices and their visible neighbours, the polyline's ends, and vertices
-    where the mean turns by more than ``FACE_TURN_RAD`` (at a corner a small tangential shift
-    of the truth moves its crossing with the normal line onto the other face).
-    """
-    e = np.diff(mean, axis=0)
-    ang = np.arctan2(e[:, 1], e[:, 0])
-    turn = np.abs((np.diff(ang) + np.pi) % (2 * np.pi) - np.pi)
-    keep = np.zeros(len(mean), bool)
-    keep[1:-1] = turn <= FACE_TURN_RAD
-    near_hidden = hidden | np.r_[hidden[1:], False] | np.r_[False, hidden[:-1]]
-    return keep & ~near_hidden
-
-
 def matched_truth(
     mean: np.ndarray,
+    hidden: np.ndarray,
     terrain: np.ndarray,
     T_plane_camera: np.ndarray,
     calibration_error: np.ndarray,
@@ -146,12 +128,13 @@ def matched_truth(
     The vertex is first moved where the camera's ray really went (its believed position under
     the true pose ``perturb_pose(T, calibration_error)``, in-plane part), then along its moved
     normal onto the truth (``normal_deviations``): the rigid motion of a calibration error is
-    matched exactly, and only the surface's deviation is measured along the normal.
+    matched exactly, and only the surface's deviation is measured along the normal. Normals
+    are those of each visible run on its own (``surface.run_normals``, as the prior uses).
     """
     T = np.asarray(T_plane_camera, float)
     M = perturb_pose(T, calibration_error) @ np.linalg.inv(T)
     moved = (np.column_stack([mean, np.zeros(len(mean)), np.ones(len(mean))]) @ M.T)[:, :2]
-    normals = vertex_normals(mean) @ M[:2, :2].T
+    normals = run_normals(mean, hidden) @ M[:2, :2].T
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     t = normal_deviations(moved, normals, terrain, max_distance_m)
     return moved + t[:, None] * normals

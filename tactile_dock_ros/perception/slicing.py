@@ -98,14 +98,17 @@ def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_w
     return cam @ R[:2].T + t[:2]
 
 
-def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: float):
+def profile_from_points(
+    points: np.ndarray, camera_xy: np.ndarray, spacing_m: float, jump_m: float = np.inf
+):
     """Per-bearing-bin median points (k, 2), ordered by decreasing bearing, and pixel counts.
 
     Each bin's point lies at the bin's mean bearing; its range is the median of the pixels'
     ranges moved to that bearing along the bin's least-squares range-vs-bearing slope. On a
     surface slanted to the rays the range changes across the bin by more than the depth noise,
     and the plain median range, paired with the mean bearing, would be off the surface by a
-    bias that no pixel count averages away.
+    bias that no pixel count averages away. A bin whose ranges span more than ``jump_m`` holds
+    a depth jump (two surfaces): a line through it means nothing, so it keeps the plain median.
     """
     rel = points - camera_xy
     ref = rel.mean(axis=0)
@@ -124,7 +127,9 @@ def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: fl
     d_range = rng - (np.add.reduceat(rng, starts) / counts)[member]
     spread = np.add.reduceat(d_bearing**2, starts)
     slope = np.add.reduceat(d_bearing * d_range, starts) / np.maximum(spread, 1e-300)
-    at_mean = rng - np.where(spread > 0, slope, 0.0)[member] * d_bearing
+    span = np.maximum.reduceat(rng, starts) - np.minimum.reduceat(rng, starts)
+    slope = np.where((spread > 0) & (span <= jump_m), slope, 0.0)
+    at_mean = rng - slope[member] * d_bearing
     at_mean = at_mean[np.lexsort((at_mean, member))]  # sorted inside each bin
     med_range = at_mean[starts + (counts - 1) // 2]
     c, s = np.cos(mean_bearing), np.sin(mean_bearing)
@@ -167,7 +172,7 @@ def extract_slice(
             f"only {len(pts)} depth points lie in the plane's band; need {params.min_points}"
         )
     camera_xy = extrinsic.camera_centre[:2].copy()
-    profile, bin_pixels = profile_from_points(pts, camera_xy, params.vertex_spacing_m)
+    profile, bin_pixels = profile_from_points(pts, camera_xy, params.vertex_spacing_m, params.gap_m)
     cut = np.flatnonzero(np.linalg.norm(np.diff(profile, axis=0), axis=1) > params.gap_m) + 1
     bounds = np.r_[0, cut, len(profile)]
     kept = [(a, b) for a, b in itertools.pairwise(bounds) if b - a >= _MIN_RUN_BINS]

@@ -19,9 +19,11 @@ angle is uncertain by tens of degrees and evidence on one edge says nothing abou
    incidence is floored at ``_MIN_INCIDENCE`` so that a grazing view is never taken as exact.
    A run's end next to a hidden stretch sits at a depth jump: its bins mix pixels of the near
    and the far surface (mixed pixels), and the far end of the jump is where a line of sight
-   grazing the occluder lands, which moves with any viewpoint error; such an end carries half
-   a vertex spacing of std (the median of a mixed bin can fall anywhere in it), and the
-   prior lets the surface turn freely next to it (the near end is the occluder's corner).
+   grazing the occluder lands. Such an end carries half a vertex spacing of std (where in its
+   bin the jump falls), and the prior has no smoothness term at its neighbour (the near end
+   is the occluder's corner, where the surface may turn any way): the end keeps its measured
+   position and its own std. (A std of the whole jump / sqrt(12), a mixed bin's median
+   anywhere between the two ranges, was tried: the benchmark's truths never needed it.)
 2. Surface prior: a piecewise smooth curve. The true second difference at vertex i along its
    normal (``h`` times the surface's turn there) is ``N(0, q_i)`` with
    ``q_i = (h bend_sigma_rad)^2 + e_i^2``: faces bend by ``bend_sigma_rad`` per vertex, and
@@ -36,7 +38,9 @@ angle is uncertain by tens of degrees and evidence on one edge says nothing abou
    straight line is determined by all of its pixels together, so neighbouring edges' angles
    are strongly correlated and evidence on one edge moves its neighbours.
 4. ``P^-1`` of each visible run (runs are independent: a hidden stretch separates surfaces)
-   is compressed to its leading eigen-columns holding ``variance_kept`` of its trace.
+   is compressed to its leading eigen-columns holding ``variance_kept`` of its trace; they
+   move each vertex along the normal of the posterior mean (where the offsets were taken
+   along the measured normals: the same to first order, but not at a shifted run end).
 Hidden vertices carry the linear interpolation of their stretch's end rows in both models, so a
 hidden stretch moves with the ends it hangs from.
 """
@@ -90,6 +94,16 @@ def visible_runs(hidden: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
+def run_normals(vertices: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    """(n, 2) unit normals of each visible run on its own (one-sided at a run's ends, never
+    through a hidden neighbour); hidden vertices get the normals of the whole polyline."""
+    normals = core_prior.vertex_normals(vertices)
+    for lo, hi in visible_runs(hidden):
+        if hi - lo >= 2:
+            normals[lo:hi] = core_prior.vertex_normals(vertices[lo:hi])
+    return normals
+
+
 def smooth_run(
     vertices: np.ndarray,
     rays: np.ndarray,
@@ -100,13 +114,14 @@ def smooth_run(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean (r, 2) and deviation columns (r, 2, k) of one visible run (steps 1-4).
 
-    ``jump_ends``: whether the first / last vertex borders a hidden stretch (mixed pixels).
+    ``jump_ends``: whether the first / last vertex borders a hidden stretch (a depth jump).
     """
     r = len(vertices)
     normals = core_prior.vertex_normals(vertices)
     incidence = np.maximum(np.abs(np.sum(rays * normals, axis=1)), _MIN_INCIDENCE)
     s2 = (sigma * incidence) ** 2
-    s2[[0, -1]] += np.asarray(jump_ends, float) * (spacing_m / 2) ** 2
+    jump = np.asarray(jump_ends, bool)
+    s2[[0, -1]] += np.where(jump, (spacing_m / 2) ** 2, 0.0)
     shift = np.zeros(r)
     if r >= 3:
         second = vertices[:-2] - 2 * vertices[1:-1] + vertices[2:]
@@ -115,14 +130,15 @@ def smooth_run(
         excess = np.maximum(np.abs(c) - surface.corner_threshold * sd_c, 0.0)
         s2[1:-1] += (excess / 4) ** 2
         q = (spacing_m * surface.bend_sigma_rad) ** 2 + excess**2
-        q[[0, -1]] += np.asarray(jump_ends, float) * spacing_m**2  # the occluder's corner
+        stiff = np.ones(r - 2)  # 0: no smoothness where a run ends at a jump (a free corner)
+        stiff[[0, -1]] *= ~jump
         D2 = np.zeros((r - 2, r))
         idx = np.arange(r - 2)
         D2[idx, idx], D2[idx, idx + 1], D2[idx, idx + 2] = 1.0, -2.0, 1.0
-        precision = D2.T @ (D2 / q[:, None]) + np.diag(1.0 / s2)
+        precision = D2.T @ (D2 * (stiff / q)[:, None]) + np.diag(1.0 / s2)
         cov = np.linalg.inv(precision)
         cov = 0.5 * (cov + cov.T)
-        shift = cov @ (D2.T @ (-c / q))
+        shift = cov @ (D2.T @ (-c * stiff / q))
     else:
         cov = np.diag(s2)
     values, vectors = np.linalg.eigh(cov)
@@ -130,7 +146,7 @@ def smooth_run(
     k = int(np.searchsorted(np.cumsum(values), surface.variance_kept * values.sum()) + 1)
     amplitudes = vectors[:, :k] * np.sqrt(values[:k])
     mean = vertices + shift[:, None] * normals
-    return mean, normals[:, :, None] * amplitudes[:, None, :]
+    return mean, core_prior.vertex_normals(mean)[:, :, None] * amplitudes[:, None, :]
 
 
 def surface_columns(
@@ -149,6 +165,8 @@ def surface_columns(
     else:
         rel = verts - terrain.camera_xy
         rays = rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
+        jump = np.zeros(n, bool)
+        jump[terrain.stretches.ravel()] = True
         blocks = []
         for lo, hi in visible_runs(terrain.hidden):
             verts[lo:hi], run_cols = smooth_run(
@@ -157,7 +175,7 @@ def surface_columns(
                 sigma[lo:hi],
                 terrain.spacing_m,
                 surface,
-                (lo > 0, hi < n),
+                (jump[lo], jump[hi - 1]),
             )
             block = np.zeros((n, 2, run_cols.shape[2]))
             block[lo:hi] = run_cols

@@ -87,7 +87,11 @@ def score_terrain(
         prior = result.prior
         frac, count = evaluation.coverage(prior, truth, result.slice.camera_xy, COVERAGE_SPACING_M)
         matched = evaluation.matched_truth(
-            prior.mean_vertices, truth, config.extrinsic.T_plane_camera, error
+            prior.mean_vertices,
+            result.slice.hidden,
+            truth,
+            config.extrinsic.T_plane_camera,
+            error,
         )
         matched[result.slice.hidden] = np.nan  # hidden vertices: the shared occlusion model
         score = evaluation.deviation_score(prior, matched, np.random.default_rng(seed + 2))
