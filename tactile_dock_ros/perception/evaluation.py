@@ -75,6 +75,24 @@ def band_distance(prior: GaussianShape, points: np.ndarray) -> np.ndarray:
     return np.sqrt(d2.min(axis=1))
 
 
+def scored_truth_points(
+    terrain: np.ndarray, camera_xy: np.ndarray, mean_vertices: np.ndarray, spacing_m: float
+) -> np.ndarray:
+    """The true terrain points a prior answers for: (k, 2), ``spacing_m`` apart.
+
+    In view (``in_view``) and, along the true polyline, between the truth points nearest to
+    the prior's first and last vertex: the stretch of terrain the prior's polyline spans. Seen
+    from an overhead camera, faces that lie behind the seen surface beyond the slice's ends
+    (the back of a hold, a wall under a slope) are in view by bearing but are no part of the
+    slice, hidden stretch or not, and are not scored.
+    """
+    pts = truth_points(terrain, spacing_m)
+    ends = [np.argmin(np.linalg.norm(pts - v, axis=1)) for v in mean_vertices[[0, -1]]]
+    index = np.arange(len(pts))
+    spanned = (index >= min(ends)) & (index <= max(ends))
+    return pts[spanned & in_view(pts, camera_xy, mean_vertices)]
+
+
 def coverage(
     prior: GaussianShape,
     terrain: np.ndarray,
@@ -82,9 +100,9 @@ def coverage(
     spacing_m: float,
     n_sigma: float = 2.0,
 ) -> tuple[float, int]:
-    """Fraction of in-view true terrain points within ``n_sigma`` of the prior, and their count."""
-    pts = truth_points(terrain, spacing_m)
-    pts = pts[in_view(pts, camera_xy, prior.mean_vertices)]
+    """Fraction of the scored true points (``scored_truth_points``) within ``n_sigma`` of the
+    prior, and their count."""
+    pts = scored_truth_points(terrain, camera_xy, prior.mean_vertices, spacing_m)
     if len(pts) == 0:
         return 0.0, 0
     return float(np.mean(band_distance(prior, pts) <= n_sigma)), len(pts)
