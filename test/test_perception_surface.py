@@ -8,7 +8,7 @@ import pytest
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.perception import evaluation, scenes
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError, SurfaceParams
-from tactile_dock_ros.perception.geometry import point_segment_distances
+from tactile_dock_ros.perception.geometry import cross2, point_segment_distances
 from tactile_dock_ros.perception.render import render_depth
 from tactile_dock_ros.perception.slicing import band_points, extract_slice, profile_from_points
 from tactile_dock_ros.perception.surface import ray_sigma, surface_columns
@@ -162,3 +162,38 @@ def test_default_is_correlated_and_scenes_still_perceive():
     )
     sl = _slice(scenes.random_terrain(np.random.default_rng(4)) - [0.0, 0.3])
     assert len(sl.pixels) == len(sl.vertices)
+
+
+def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
+    truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(1))
+    depth = render_depth(
+        truth,
+        K,
+        CONFIG.extrinsic.T_plane_camera,
+        bench_prior.IMAGE,
+        np.random.default_rng(0),
+        CONFIG.depth_noise,
+    )
+    plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
+    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.1)
+    tailed = perceive(
+        depth, K, dataclasses.replace(CONFIG, occlusion=occlusion), np.random.default_rng(1)
+    ).prior
+    k = (tailed.n_vertices - plain.prior.n_vertices) // 2
+    assert k == 5
+    mean, camera = tailed.mean_vertices, plain.slice.camera_xy
+    np.testing.assert_allclose(mean[k:-k], plain.prior.mean_vertices, atol=1e-12)
+    # Walking on (solid on the left), each tail lies behind the line of sight through its end.
+    for end, tail, sign in ((mean[-k - 1], mean[-k:], 1.0), (mean[k], mean[:k], -1.0)):
+        ray = end - camera
+        assert np.all(sign * cross2(ray, tail - end) >= 0)
+        assert np.linalg.norm(tail - end, axis=1).max() > 0.05
+    # The tails move with their end vertices (calibration) and have their own spread.
+    A = tailed.basis.reshape(tailed.n_vertices, 2, -1)
+    m = plain.prior.n_basis
+    np.testing.assert_allclose(A[:k, :, :m], np.broadcast_to(A[k, :, :m], (k, 2, m)))
+    assert np.linalg.norm(A[-k:, :, m:]) > 0.01
+    with pytest.raises(PerceptionError, match="tail_m"):
+        PerceptionConfig.from_dict(
+            {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}, "occlusion": {"tail_m": -1}}
+        )

@@ -148,9 +148,11 @@ class OcclusionParams:
     samples: int = 256
     trajectories: int = 6
     max_hidden_vertices: int = 30
+    tail_m: float = 0.0
 
     def __post_init__(self) -> None:
         _positive("occlusion.bridge_sigma_m_per_sqrt_m", self.bridge_sigma_m_per_sqrt_m)
+        _positive("occlusion.tail_m", self.tail_m, allow_zero=True)
         if min(self.columns, self.trajectories, self.max_hidden_vertices) < 1 or self.samples < 2:
             raise PerceptionError("occlusion counts must be >= 1 (samples >= 2)")
 

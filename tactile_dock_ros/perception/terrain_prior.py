@@ -85,6 +85,56 @@ def calibration_transform(vertices: np.ndarray, extrinsic: Extrinsic):
     return mean, u[:, keep] * sv[keep]
 
 
+def add_tails(
+    verts: np.ndarray,
+    basis: np.ndarray,
+    camera_xy: np.ndarray,
+    occlusion: OcclusionParams,
+    spacing_m: float,
+    rng: np.random.Generator,
+    sampler: Sampler,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Hidden tails of ``occlusion.tail_m`` past both ends of the slice, along the line of sight.
+
+    Past an end the camera saw nothing (a silhouette or the image border): the terrain goes on
+    somewhere behind the ray through the end vertex. Without a tail the open polyline lets a
+    path pass around the end through what may be rock. Each tail is a Brownian motion from the
+    end vertex along that ray (``occlusion_columns(free_end=True)``), constrained to the solid
+    side; its rows also move with the end vertex's rows.
+    """
+    n, m = len(verts), basis.shape[1]
+    k = max(2, round(occlusion.tail_m / spacing_m))
+    A = basis.reshape(n, 2, m)
+    tails = []
+    for end, side in ((0, -1.0), (n - 1, 1.0)):  # the solid is left of the walking direction
+        ray = verts[end] - camera_xy
+        far = verts[end] + occlusion.tail_m * ray / max(np.linalg.norm(ray), 1e-12)
+        tails.append(
+            occlusion_columns(
+                verts[end],
+                far,
+                k,
+                occlusion.bridge_sigma_m_per_sqrt_m,
+                occlusion.columns,
+                occlusion.samples,
+                occlusion.trajectories,
+                rng,
+                sampler,
+                free_end=True,
+                side=side,
+            )
+        )
+    (first, first_cols), (last, last_cols) = tails
+    r1, r2 = first_cols.shape[1], last_cols.shape[1]
+    out = np.zeros((n + 2 * k, 2, m + r1 + r2))
+    out[k : k + n, :, :m] = A
+    out[:k, :, :m] = A[0]
+    out[k + n :, :, :m] = A[-1]
+    out[:k, :, m : m + r1] = first_cols.reshape(k, 2, r1)[::-1]  # walking order: far to near
+    out[k + n :, :, m + r1 :] = last_cols.reshape(k, 2, r2)
+    return np.vstack([first[::-1], verts, last]), out.reshape(2 * (n + 2 * k), -1)
+
+
 def build_prior(
     terrain: TerrainSlice,
     extrinsic: Extrinsic,
@@ -129,6 +179,10 @@ def build_prior(
             *blocks,
         ]
     )
+    if occlusion.tail_m > 0:
+        verts, basis = add_tails(
+            verts, basis, terrain.camera_xy, occlusion, terrain.spacing_m, rng, sampler
+        )
     return GaussianShape(verts.ravel(), basis, closed=False, friction=friction)
 
 
@@ -138,6 +192,12 @@ class Perception:
 
     slice: TerrainSlice
     prior: GaussianShape
+
+    @property
+    def hidden(self) -> np.ndarray:
+        """(prior.n_vertices,) bool: hidden prior vertices (stretches and the two tails)."""
+        k = (self.prior.n_vertices - len(self.slice.hidden)) // 2
+        return np.r_[np.ones(k, bool), self.slice.hidden, np.ones(k, bool)]
 
 
 def perceive(

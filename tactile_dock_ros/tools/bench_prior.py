@@ -92,12 +92,12 @@ def score_terrain(
         frac, count = evaluation.coverage(prior, truth, result.slice.camera_xy, COVERAGE_SPACING_M)
         matched = evaluation.matched_truth(
             prior.mean_vertices,
-            result.slice.hidden,
+            result.hidden,
             truth,
             config.extrinsic.T_plane_camera,
             error,
         )
-        matched[result.slice.hidden] = np.nan  # hidden vertices: the shared occlusion model
+        matched[result.hidden] = np.nan  # hidden vertices: the shared occlusion model
         score = evaluation.deviation_score(prior, matched, np.random.default_rng(seed + 2))
         pts = evaluation.scored_truth_points(
             truth, result.slice.camera_xy, prior.mean_vertices, COVERAGE_SPACING_M
