@@ -7,7 +7,12 @@ import pytest
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.perception import evaluation, scenes
-from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError, SurfaceParams
+from tactile_dock_ros.perception.config import (
+    DepthNoise,
+    PerceptionConfig,
+    PerceptionError,
+    SurfaceParams,
+)
 from tactile_dock_ros.perception.geometry import cross2, point_segment_distances
 from tactile_dock_ros.perception.render import render_depth
 from tactile_dock_ros.perception.slicing import band_points, extract_slice, profile_from_points
@@ -162,6 +167,9 @@ def test_default_is_correlated_and_scenes_still_perceive():
     )
     sl = _slice(scenes.random_terrain(np.random.default_rng(4)) - [0.0, 0.3])
     assert len(sl.pixels) == len(sl.vertices)
+    exact = DepthNoise(sigma0_m=0.0, quadratic_per_m=0.0)
+    verts, cols = surface_columns(sl, CONFIG.extrinsic, exact, SurfaceParams(quantization_m=0.0))
+    assert np.all(np.isfinite(verts)) and np.all(np.isfinite(cols)) and cols.shape[1] > 0
 
 
 def test_hidden_tails_close_the_slice_ends_on_the_solid_side():

@@ -55,6 +55,7 @@ from .slicing import TerrainSlice
 
 MEDIAN_EFFICIENCY = float(np.sqrt(np.pi / 2))  # std(median of N) * sqrt(N) / sigma, large N
 _MIN_INCIDENCE = 0.1  # |cos| between ray and normal: a view grazing below ~6 degrees
+_MIN_SIGMA_M = 1e-6  # a noise-free, unquantized image still gives a (1 um) positive variance
 
 
 def camera_depths(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
@@ -119,7 +120,7 @@ def smooth_run(
     r = len(vertices)
     normals = core_prior.vertex_normals(vertices)
     incidence = np.maximum(np.abs(np.sum(rays * normals, axis=1)), _MIN_INCIDENCE)
-    s2 = (sigma * incidence) ** 2
+    s2 = np.maximum(sigma * incidence, _MIN_SIGMA_M) ** 2
     jump = np.asarray(jump_ends, bool)
     s2[[0, -1]] += np.where(jump, (spacing_m / 2) ** 2, 0.0)
     shift = np.zeros(r)
