@@ -97,11 +97,18 @@ def sample_truncated_gaussian(
 Sampler = Callable[[np.ndarray, np.ndarray, np.ndarray, int, np.random.Generator], np.ndarray]
 
 
-def bridge_covariance(k: int, length_m: float, sigma: float) -> np.ndarray:
-    """(k, k) covariance of one coordinate of a Brownian bridge at the k interior points."""
-    s = np.arange(1, k + 1) / (k + 1)
+def arc_fractions(k: int, free_end: bool) -> np.ndarray:
+    """(k,) fractions of the chord at which the points sit: interior ``j / (k + 1)`` of a bridge,
+    ``j / k`` (the last at the free end) of a Brownian motion."""
+    return np.arange(1, k + 1) / (k if free_end else k + 1)
+
+
+def bridge_covariance(k: int, length_m: float, sigma: float, free_end: bool = False) -> np.ndarray:
+    """(k, k) covariance of one coordinate of a Brownian bridge at the k interior points, or
+    with ``free_end`` of a Brownian motion from the first end, ``sigma^2 L min(s_i, s_j)``."""
+    s = arc_fractions(k, free_end)
     lo, hi = np.minimum.outer(s, s), np.maximum.outer(s, s)
-    return sigma**2 * length_m * lo * (1.0 - hi)
+    return sigma**2 * length_m * lo * (1.0 if free_end else 1.0 - hi)
 
 
 def occlusion_columns(
@@ -114,20 +121,24 @@ def occlusion_columns(
     trajectories: int,
     rng: np.random.Generator,
     sampler: Sampler = sample_truncated_gaussian,
+    free_end: bool = False,
+    side: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean (k, 2) and PCA basis (2k, r <= columns) of the constrained bridge from a to b.
 
     ``sigma`` is the diffusion in metres per sqrt(metre); the basis columns are principal
     directions scaled by their standard deviations, so their outer products approximate the
-    sample covariance (the variance of the dropped components is lost).
+    sample covariance (the variance of the dropped components is lost). ``free_end``: a
+    Brownian motion from ``a`` along the chord to ``b`` instead (the hidden tail past a
+    silhouette, ``terrain_prior``); ``side = -1`` puts the hidden side right of a -> b.
     """
     a, b = np.asarray(a, float), np.asarray(b, float)
     chord = b - a
     length = float(np.linalg.norm(chord))
     if k < 1 or length <= 0:
         raise ValueError("a bridge needs k >= 1 interior points between distinct ends")
-    normal = np.array([-chord[1], chord[0]]) / length  # left of a -> b: the hidden side
-    cov = bridge_covariance(k, length, sigma)
+    normal = side * np.array([-chord[1], chord[0]]) / length  # left of a -> b: hidden side
+    cov = bridge_covariance(k, length, sigma, free_end)
     chol = np.linalg.cholesky(cov)
     F = np.hstack([normal[0] * chol, normal[1] * chol])  # n . W_j on whitened (xi_x, xi_y)
     w0 = 0.5 * np.sqrt(np.diag(cov))  # strictly inside: W_j = w0_j n
@@ -135,7 +146,7 @@ def occlusion_columns(
     start = np.tile(np.concatenate([normal[0] * xi0, normal[1] * xi0]), (samples, 1))
     xi = sampler(F, np.zeros(k), start, trajectories, rng)
     W = np.stack([xi[:, :k] @ chol.T, xi[:, k:] @ chol.T], axis=2)  # (S, k, 2)
-    s = np.arange(1, k + 1)[:, None] / (k + 1)
+    s = arc_fractions(k, free_end)[:, None]
     pts = (a + s * chord + W).reshape(samples, 2 * k)
     mean = pts.mean(axis=0)
     _, sv, vt = np.linalg.svd(pts - mean, full_matrices=False)

@@ -31,6 +31,7 @@ SUITES = {
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
+    "prior": "depth prior calibration: 2-sigma coverage, NLL, energy score, old vs new model",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "safety": "executor under faults over DDS: sensor dropout latency, envelope, load jitter",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
