@@ -1,6 +1,8 @@
-"""The docking benchmark runs end to end on a tiny configuration and writes its JSON."""
+"""The docking benchmark runs end to end on tiny configurations and writes its JSON."""
 
 import json
+
+import pytest
 
 from tactile_dock_ros.tools import bench
 
@@ -8,6 +10,7 @@ from tactile_dock_ros.tools import bench
 def test_docking_bench_small(tmp_path):
     out = tmp_path / "docking.json"
     argv = ["docking", "--instances", "3", "--max-cycles", "4", "--problems", "notch"]
+    argv += ["--prior", "problem", "--mode", "compliant"]
     assert bench.main([*argv, "--strategies", "ours", "gw", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert [r["strategy"] for r in report["results"]] == ["ours", "gw"]
@@ -18,3 +21,44 @@ def test_docking_bench_small(tmp_path):
         assert 0 < row["cycle_seconds_median"] <= row["cycle_seconds_max"]
         later = [t for e in row["episodes"] for t in e["cycle_seconds"][1:]]
         assert (row["later_cycle_seconds_median"] is None) == (not later)
+    ours, gw = report["results"]
+    assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
+
+
+def _quick(tmp_path, name, *extra):
+    out = tmp_path / name
+    argv = ["docking", "--quick", "--problems", "notch", "--strategies", "ours", "--seed", "1"]
+    assert bench.main([*argv, *extra, "--json", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
+    report = _quick(tmp_path, "both.json", "--prior", "depth", "problem", "--workers", "2")
+    rows = {(r["prior"], r["mode"]): r for r in report["results"]}
+    assert set(rows) == {
+        (p, m) for p in ("depth", "problem") for m in ("compliant", "non-compliant")
+    }
+    assert all(r["instances"] == 3 and r["errors"] == 0 for r in rows.values())
+    truths = report["truths"]["notch"]
+    errors = [tuple(t["calibration_error"]) for t in truths]
+    assert len(set(errors)) == 3 and all(len(e) == 6 for e in errors)  # drawn per truth
+    assert all(t["depth_prior_vertices"] >= 2 for t in truths)
+    # the same seeds in one process give the same episodes and the same drawn errors
+    again = _quick(tmp_path, "depth.json", "--prior", "depth", "--mode", "non-compliant")
+    assert [tuple(t["calibration_error"]) for t in again["truths"]["notch"]] == errors
+    key = ("depth", "non-compliant")
+    strip = [{k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in rows[key]["episodes"]]
+    assert strip == [
+        {k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in again["results"][0]["episodes"]
+    ]
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
+     ["--samples", "1"], ["--max-cycles", "-2"]],
+)  # fmt: skip
+def test_bad_arguments_are_rejected(bad):
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(["docking", "--quick", *bad])
+    assert exit_info.value.code == 2
