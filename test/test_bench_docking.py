@@ -62,3 +62,22 @@ def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:
         bench.main(["docking", "--quick", *bad])
     assert exit_info.value.code == 2
+
+
+def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
+    from tactile_dock_ros.tools import bench_docking
+
+    real, calls = bench_docking._episode, []
+
+    def stop_after_four(task):
+        calls.append(task)
+        if len(calls) > 4:
+            raise KeyboardInterrupt
+        return real(task)
+
+    monkeypatch.setattr(bench_docking, "_episode", stop_after_four)
+    report = _quick(tmp_path, "cut.json", "--prior", "problem", "--strategies", "ours", "gw")
+    assert report["unfinished_episodes"] == 3 * 2 * 2 - 4
+    # instance-major order: the first truth ran in both modes with both strategies
+    assert [len(r["episodes"]) for r in report["results"]] == [1, 1, 1, 1]
+    assert {t.instance for t in calls[:4]} == {0}

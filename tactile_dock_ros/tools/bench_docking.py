@@ -238,8 +238,9 @@ def _line(row: dict) -> str:
     )
 
 
-def _run_all(tasks: list[_Task], workers: int) -> list[dict]:
-    """Episodes in task order; progress on stderr."""
+def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
+    """Episodes in task order (None: not run); progress on stderr. Ctrl-C (SIGINT) stops the
+    run and keeps the finished episodes."""
     out: list[dict | None] = [None] * len(tasks)
 
     def done(k: int, record: dict) -> None:
@@ -253,13 +254,16 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict]:
             flush=True,
         )
 
-    if workers == 1:
-        for k, task in enumerate(tasks):
-            done(k, _episode(task))
-        return out
-    with multiprocessing.get_context("fork").Pool(workers) as pool:
-        for k, record in pool.imap_unordered(_indexed, enumerate(tasks)):
-            done(k, record)
+    try:
+        if workers == 1:
+            for k, task in enumerate(tasks):
+                done(k, _episode(task))
+        else:
+            with multiprocessing.get_context("fork").Pool(workers) as pool:
+                for k, record in pool.imap_unordered(_indexed, enumerate(tasks)):
+                    done(k, record)
+    except KeyboardInterrupt:
+        print("interrupted: reporting the finished episodes", file=sys.stderr, flush=True)
     return out
 
 
@@ -271,42 +275,46 @@ def run(args) -> dict:
     instances, max_cycles = (3, 8) if args.quick else (args.instances, args.max_cycles)
     config = PerceptionConfig.load(args.perception_config) if "depth" in args.prior else None
     truths = {name: _truths(args, name, instances, config) for name in args.problems}
-    tasks = [
-        _Task(
-            name,
-            source,
-            mode,
-            strategy,
-            t["instance"],
-            t["truth"],
-            _problem(name).prior if source == "problem" else t["depth"],
-            t["seed"],
-            max_cycles,
-            args.samples,
-        )
+    keys = [
+        (name, source, mode, strategy)
         for name in args.problems
         for source in args.prior
         for mode in args.mode
         for strategy in args.strategies
-        for t in truths[name]
+    ]
+    # instance-major order: a run stopped early leaves every row with its first instances
+    tasks = [
+        _Task(
+            *key,
+            i,
+            truths[key[0]][i]["truth"],
+            _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
+            truths[key[0]][i]["seed"],
+            max_cycles,
+            args.samples,
+        )
+        for i in range(instances)
+        for key in keys
     ]
     records = _run_all(tasks, args.workers)
-    results, rows = [], {}
+    rows: dict[tuple, list[dict]] = {key: [] for key in keys}
     for task, record in zip(tasks, records, strict=True):
-        feasible = truths[task.problem][task.instance]["feasible"][task.mode]
-        key = (task.problem, task.prior_source, task.mode, task.strategy)
-        rows.setdefault(key, []).append({**record, "feasible": feasible})
-    for (name, source, mode, strategy), episodes in rows.items():
-        results.append(
-            {
-                "problem": name,
-                "prior": source,
-                "mode": mode,
-                "strategy": strategy,
-                **_summary(episodes),
-                "episodes": episodes,
-            }
-        )
+        if record is not None:
+            feasible = truths[task.problem][task.instance]["feasible"][task.mode]
+            key = (task.problem, task.prior_source, task.mode, task.strategy)
+            rows[key].append({**record, "feasible": feasible})
+    results = [
+        {
+            "problem": name,
+            "prior": source,
+            "mode": mode,
+            "strategy": strategy,
+            **_summary(episodes),
+            "episodes": episodes,
+        }
+        for (name, source, mode, strategy), episodes in rows.items()
+        if episodes
+    ]
     _ratios(results)
     print(HEADER)
     for row in results:
@@ -316,6 +324,7 @@ def run(args) -> dict:
         "max_cycles": max_cycles,
         "samples": args.samples,
         "workers": args.workers,
+        "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
         "note": "wall times per process, from a shared 2-core machine "
         f"running {args.workers} episode process(es)",
