@@ -81,3 +81,30 @@ def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
     # instance-major order: the first truth ran in both modes with both strategies
     assert [len(r["episodes"]) for r in report["results"]] == [1, 1, 1, 1]
     assert {t.instance for t in calls[:4]} == {0}
+
+
+def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "term.json"
+    argv = ["docking", "--quick", "--problems", "sloper", "--prior", "depth", "--json", str(out)]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "tactile_dock_ros.tools.bench", *argv],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),  # as `cmd &` in a script
+    )
+    for line in process.stderr:  # the first finished episode
+        if line.startswith("[1/"):
+            break
+    process.send_signal(signal.SIGTERM)
+    process.stderr.read()
+    assert process.wait(timeout=120) == 0
+    report = json.loads(out.read_text())
+    assert 0 < report["unfinished_episodes"] < 3 * 2 * 3
+    assert sum(len(r["episodes"]) for r in report["results"]) == 18 - report["unfinished_episodes"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import functools
 import multiprocessing
+import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,6 +93,7 @@ class _Task:
     instance: int
     truth: np.ndarray
     prior: GaussianShape | None  # None: no prior (perception failed)
+    feasible: bool  # simulate.feasible in this mode
     seed: tuple[int, ...]
     max_cycles: int
     samples: int
@@ -238,9 +240,14 @@ def _line(row: dict) -> str:
     )
 
 
+def _stop(signum, frame):
+    raise KeyboardInterrupt
+
+
 def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
-    """Episodes in task order (None: not run); progress on stderr. Ctrl-C (SIGINT) stops the
-    run and keeps the finished episodes."""
+    """Episodes in task order (None: not run); progress on stderr. SIGINT or SIGTERM stops the
+    run and keeps the finished episodes (handlers set here: a shell starts background jobs
+    with SIGINT ignored)."""
     out: list[dict | None] = [None] * len(tasks)
 
     def done(k: int, record: dict) -> None:
@@ -249,11 +256,13 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
         t = tasks[k]
         print(
             f"[{finished}/{len(tasks)}] {t.problem} {t.prior_source} {t.mode} {t.strategy} "
-            f"#{t.instance}: {record['outcome']} in {record['cycles']} cycles",
+            f"#{t.instance} ({'feasible' if t.feasible else 'infeasible'}): "
+            f"{record['outcome']} in {record['cycles']} cycles",
             file=sys.stderr,
             flush=True,
         )
 
+    handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         if workers == 1:
             for k, task in enumerate(tasks):
@@ -264,6 +273,9 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
                     done(k, record)
     except KeyboardInterrupt:
         print("interrupted: reporting the finished episodes", file=sys.stderr, flush=True)
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
     return out
 
 
@@ -289,6 +301,7 @@ def run(args) -> dict:
             i,
             truths[key[0]][i]["truth"],
             _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
+            truths[key[0]][i]["feasible"][key[2]],
             truths[key[0]][i]["seed"],
             max_cycles,
             args.samples,
@@ -300,9 +313,8 @@ def run(args) -> dict:
     rows: dict[tuple, list[dict]] = {key: [] for key in keys}
     for task, record in zip(tasks, records, strict=True):
         if record is not None:
-            feasible = truths[task.problem][task.instance]["feasible"][task.mode]
             key = (task.problem, task.prior_source, task.mode, task.strategy)
-            rows[key].append({**record, "feasible": feasible})
+            rows[key].append({**record, "feasible": task.feasible})
     results = [
         {
             "problem": name,
