@@ -49,6 +49,7 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("mock_hardware", "rate_hz:=0.0", "rate_hz"),
         ("mock_hardware", "stiffness:=500", "stiffness"),  # an integer where a float is due
         ("perception", "capture:=sometimes", "capture"),
+        ("inference", "method:=mh", "method: 'mh' is not one of"),  # a benchmark baseline only
     ],
 )
 def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path):

@@ -4,13 +4,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tactile_dock_ros.core import problems, sampling
+from tactile_dock_ros.core import convergence, problems, sampling
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
 from tactile_dock_ros.core.constraints import history_consistent, prune_pairs
 from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.sampling import ChainRunner, sample_posterior
-from tactile_dock_ros.core.sampling_problems import probe_history
+from tactile_dock_ros.core.sampling_problems import (
+    fig9_problem,
+    probe_history,
+    three_ledges_after_probes,
+)
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +178,7 @@ def test_benchmark_histories_are_consistent_with_their_truths():
 def test_warm_start_from_the_previous_posterior(sloper_case):
     problem, history = sloper_case
     shape = problem.prior
-    before = sample_posterior(shape, history.subset([0, 1]), 80, np.random.default_rng(4))
+    before = sample_posterior(shape, history.subset([0, 1]), 120, np.random.default_rng(4))
     consistent = history_consistent(False, before.vertices, history, problem.friction)
     assert consistent.sum() >= 16  # enough of the old posterior survives the new probe
     warm = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
@@ -182,6 +186,11 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
     assert history_consistent(False, warm.vertices, history, problem.friction).all()
     again = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
     assert np.array_equal(warm.z, again.z)
+    # two consistent rows: one chain each, descents seed the rest (no seed holds half)
+    few = np.vstack([before.z[consistent][:2], before.z[~consistent][:4]])
+    out = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=few)
+    assert out.info["warm_seeds"] == 2 and out.info["distinct_seeds"] >= sampling.SEED_MIN_DISTINCT
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
     # no row consistent: descent starts from them, default burn-in
     bad = before.z[~consistent][:3]
     out = sample_posterior(shape, history, 30, np.random.default_rng(6), init_z=bad)
@@ -256,3 +265,159 @@ def test_default_hmc_chains_cover_the_samples_without_surplus(n):
     assert 16 <= chains <= sampling.MAX_HMC_CHAINS
     if chains > 16:  # above the minimum: >= 16 draws per chain, less than one chain surplus
         assert per_chain >= 16 and chains * per_chain - n < per_chain
+
+
+# --- seeding that cannot trap chains, and the between-chain diagnostic (issue 12 item 3) ---
+
+KNOWN_BAD_SEEDS = [13, 111]  # before the fix: half the chains in a pocket of ~4e-5 prior mass
+MEAN_TOL = 0.3  # posterior std: every run's marginal means must be this close to rejection's
+
+
+@pytest.fixture(scope="module")
+def problem2_reference():
+    """Fig. 9 problem 2 and a long rejection run: posterior vertex means and std."""
+    problem, history = fig9_problem(2)
+    ref = sample_posterior(
+        problem.prior, history, 6000, np.random.default_rng(12345), "rejection", max_draws=10**6
+    )
+    assert len(ref.z) == 6000
+    x = ref.vertices.reshape(len(ref.z), -1)
+    return problem, history, x.mean(0), x.std(0)
+
+
+def _mean_error(out, mean, std):
+    """Largest standardized error of the marginal vertex means."""
+    x = out.vertices.reshape(len(out.z), -1)
+    return float(np.max(np.abs(x.mean(0) - mean) / std))
+
+
+def _no_exact_seeds(shape, *args):
+    return np.zeros((0, shape.n_basis)), 0
+
+
+def _check_seeds(reference, method, seeds, descent_only, monkeypatch):
+    problem, history, mean, std = reference
+    if descent_only:  # the path of hard problems (three_ledges): descent, screening, re-seeding
+        monkeypatch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
+    errors = {}
+    for seed in seeds:
+        out = sample_posterior(problem.prior, history, 2000, np.random.default_rng(seed), method)
+        assert len(out.z) == 2000 and out.convergence.trapped == 0
+        errors[seed] = _mean_error(out, mean, std)
+    assert max(errors.values()) < MEAN_TOL, errors
+
+
+@pytest.mark.parametrize(
+    ("method", "seeds", "descent_only"),
+    [
+        ("hmc", [*KNOWN_BAD_SEEDS, 0, 1], False),
+        ("hmc", [*KNOWN_BAD_SEEDS, 90], True),  # 90: descent put 13 chains in the pocket
+        ("gibbs", KNOWN_BAD_SEEDS, False),
+    ],
+)
+def test_problem2_means_match_rejection_on_the_known_bad_seeds(
+    problem2_reference, method, seeds, descent_only, monkeypatch
+):
+    """The seeds that trapped half the default HMC chains (125 chains, 2000 samples) in a
+    pocket (standardized mean error 4.6 before the fix) and a few more; the 40-seed version
+    is marked slow."""
+    _check_seeds(problem2_reference, method, seeds, descent_only, monkeypatch)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)  # 40 Gibbs runs of 2000 sweeps: ~1 min alone, far more under load
+@pytest.mark.parametrize(
+    ("method", "descent_only"), [("hmc", False), ("hmc", True), ("gibbs", False)]
+)
+def test_problem2_means_match_rejection_over_40_seeds(
+    problem2_reference, method, descent_only, monkeypatch
+):
+    _check_seeds(problem2_reference, method, range(40), descent_only, monkeypatch)
+
+
+def _pocket_state(problem, history, mean, std):
+    """A feasible state far (> 5 posterior std) from the posterior mean: descents from prior
+    draws land in such pockets ~9 % of the time on problem 2."""
+    shape = problem.prior
+    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
+    rng = np.random.default_rng(0)
+    z0 = sampling._contact_projection(shape, history, shape.sample_z(rng, 64))
+    z, count = sampling.random_descent(system, z0, rng, 60)
+    ok = (count == 0) & history_consistent(False, shape.vertices(z), history, shape.friction)
+    dev = np.max(np.abs(shape.vertices(z).reshape(len(z), -1) - mean) / std, axis=1)
+    far = np.flatnonzero(ok & (dev > 5))
+    assert far.size
+    return z[far[0]]
+
+
+def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch, caplog):
+    """Warm-start 4 of 20 chains in a pocket: without re-seeding the diagnostic flags them,
+    warns and the means are off; with it they are re-seeded and the means are right."""
+    problem, history, mean, std = problem2_reference
+    pocket = _pocket_state(problem, history, mean, std)
+    good = sample_posterior(problem.prior, history, 16, np.random.default_rng(1), "rejection").z
+    init = np.vstack([good, np.tile(pocket, (4, 1))])
+
+    def run():
+        return sample_posterior(
+            problem.prior, history, 800, np.random.default_rng(2), chains=20, init_z=init
+        )
+
+    monkeypatch.setattr(sampling, "RESEED_ROUNDS", 0)
+    with caplog.at_level("WARNING", logger=sampling.__name__):
+        trapped = run()
+    assert trapped.convergence.trapped == 4 and not trapped.convergence.converged
+    assert trapped.convergence.rhat > trapped.convergence.rhat_limit
+    assert "disagree" in caplog.text
+    assert _mean_error(trapped, mean, std) > 1.0
+    monkeypatch.setattr(sampling, "RESEED_ROUNDS", 2)
+    caplog.clear()
+    with caplog.at_level("WARNING", logger=sampling.__name__):
+        fixed = run()
+    assert fixed.convergence.reseeded >= 4 and fixed.convergence.rounds >= 1
+    assert fixed.convergence.converged and fixed.convergence.trapped == 0
+    assert "re-seeded" in caplog.text
+    assert _mean_error(fixed, mean, std) < MEAN_TOL
+    assert history_consistent(False, fixed.vertices, history, problem.friction).all()
+
+
+def test_split_rhat_and_trapped_chains_on_synthetic_draws():
+    rng = np.random.default_rng(0)
+    draws = rng.normal(size=(40, 16, 3))
+    assert np.all(np.abs(convergence.split_rhat(draws) - 1) < 0.05)
+    assert convergence.trapped_chains(draws).size == 0
+    shifted = draws.copy()
+    shifted[[3, 7], :, 1] += 10.0  # two chains stuck 10 std away in one coordinate
+    assert convergence.split_rhat(shifted)[1] > 1.5
+    np.testing.assert_array_equal(convergence.trapped_chains(shifted), [3, 7])
+    half = draws.copy()
+    half[:20, :, 0] += 10.0  # no majority: nothing can be called trapped
+    assert convergence.trapped_chains(half).size == 0
+    assert convergence.split_rhat(half)[0] > 2
+    assert np.all(np.isnan(convergence.split_rhat(draws[:, :3])))  # too short to split
+    drift = np.cumsum(rng.normal(size=(8, 64, 1)), axis=1)  # random walks: not converged
+    assert convergence.split_rhat(drift)[0] > convergence.RHAT_LIMIT
+    # the node's 16 chains x 7 draws: mixed chains often exceed 1.1, rarely the raised limit
+    rhat = np.array(
+        [convergence.split_rhat(rng.normal(size=(16, 7, 24))).max() for _ in range(200)]
+    )
+    limit = convergence.rhat_limit(16, 7, 24)
+    assert limit > convergence.RHAT_LIMIT and np.mean(rhat > limit) < 0.05
+    assert np.mean(rhat > convergence.RHAT_LIMIT) > 0.3
+    assert convergence.rhat_limit(125, 16, 24) == convergence.RHAT_LIMIT
+    still = np.zeros((4, 8, 1))
+    assert convergence.split_rhat(still)[0] == 1.0
+    still[0] += 1.0
+    assert convergence.split_rhat(still)[0] == np.inf
+
+
+def test_atypical_descent_seeds_are_screened():
+    """A seed far less likely under the prior than the typical one is dropped; on
+    three_ledges descents do land in such places (|z|^2 ~250 against ~100)."""
+    z = np.random.default_rng(0).normal(size=(9, 5))
+    far = np.vstack([z, 4 * np.ones(5)])  # |z|^2 = 80 against a median near 5
+    np.testing.assert_array_equal(sampling._typical(far, far), [True] * 9 + [False])
+    problem, history, _ = three_ledges_after_probes(10, seed=0)
+    seeds = sampling._seed(problem.prior, history, np.random.default_rng(4), 16, 1e-4, 8, 60)
+    assert seeds.screened > 0 and seeds.distinct >= sampling.SEED_MIN_DISTINCT
+    assert np.all(sampling._typical(seeds.z, seeds.z))

@@ -10,6 +10,7 @@ by the remaining constraints leaves exactly the full posterior).
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from .constraint_systems import HistoryConstraints
 from .constraints import observation_violations, prune_pairs
+from .convergence import Convergence, rhat_limit, split_rhat, trapped_chains
 from .ess import effective_sample_size
 from .history import History
 from .intervals import (
@@ -29,9 +31,20 @@ from .intervals import (
 )
 from .shape import GaussianShape
 
-METHODS = ("hmc", "gibbs", "mh", "rejection")
+LOG = logging.getLogger(__name__)
+
+METHODS = ("hmc", "gibbs", "mh", "rejection")  # every sampler (the benchmark compares them)
+MCMC_METHODS = ("hmc", "gibbs", "mh")
+# what the nodes offer: MH is a benchmark baseline only (its chains barely move: split R-hat
+# ~4 on Fig. 9 problem 2; std 0.35-0.63 of the posterior's on problem 3 in the issue-12 audit)
+NODE_METHODS = ("hmc", "gibbs", "rejection")
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
-SEED_DESCENTS = 4
+SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
+SEED_MIN_DISTINCT = 3  # distinct seeds wanted (restart descents): one pocket holds < 1/2
+SEED_PRIOR_BATCH = 128  # prior draws tried as exact seeds before anything else
+SEED_PRIOR_DRAWS = 32  # prior draws per chain at most for exact seeds (acceptance >~ 3 %)
+SEED_Z2_MARGIN = 4.0  # descent seeds with |z|^2 this many chi-square std above typical: dropped
+RESEED_ROUNDS = 2  # re-seed + rerun rounds for trapped chains (``convergence``)
 WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
 WINDOW_MIN = 0.01  # rad: smallest adaptive HMC look-ahead window
 WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then clipped)
@@ -46,7 +59,9 @@ class PosteriorSamples:
         method: sampler name; ess: effective sample size (min over vertex coordinates);
         seconds: wall time including pruning and seeding.
         dropped: indices into the given history of observations ignored as inconsistent.
-        info: sampler counters (steps, chains, pairs kept, acceptance, bounces, ...).
+        info: sampler counters (steps, chains, pairs kept, acceptance, bounces, seeds, ...).
+        convergence: between-chain checks and re-seeding (``core.convergence``); the default
+            (R-hat nan, nothing trapped) for independent draws.
     """
 
     z: np.ndarray
@@ -56,6 +71,7 @@ class PosteriorSamples:
     seconds: float
     dropped: np.ndarray
     info: dict = field(default_factory=dict)
+    convergence: Convergence = field(default_factory=Convergence)
 
     @property
     def est(self) -> float:
@@ -289,8 +305,8 @@ class ChainRunner:
         hmc_duration: float = np.pi / 2,
         mh_scale: float | None = None,
     ):
-        if method not in ("hmc", "gibbs", "mh"):
-            raise ValueError(f"unknown MCMC method {method!r}")
+        if method not in MCMC_METHODS:
+            raise ValueError(f"unknown MCMC method {method!r}; choose from {MCMC_METHODS}")
         self.system, self.method, self.rng = system, method, rng
         self.hmc_duration = hmc_duration
         self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
@@ -441,38 +457,96 @@ def _warm_seeds(shape, history, system, init_z, chains, rng):
     return good[rng.permutation(len(good))[:chains]], rest[rng.permutation(len(rest))]
 
 
-def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None):
-    """Feasible seeds (C, m) for the chains and the HistoryConstraints they were found on.
+def _exact_seeds(shape, history, system, chains, rng):
+    """Up to ``chains`` prior draws consistent with the history and feasible for the pruned
+    ``system`` (exact posterior draws), and the prior draws spent: a first batch of
+    SEED_PRIOR_BATCH, then up to SEED_PRIOR_DRAWS per chain unless the first batch had no hit
+    (acceptance too low for the budget to pay: descent seeds the chains)."""
+    found, count, spent = [np.zeros((0, shape.n_basis))], 0, 0
+    budget = max(SEED_PRIOR_BATCH, SEED_PRIOR_DRAWS * chains)
+    while count < chains and spent < budget:
+        size = SEED_PRIOR_BATCH if spent == 0 else min(8 * SEED_PRIOR_BATCH, budget - spent)
+        z = shape.sample_z(rng, size)
+        spent += size
+        ok = _consistent_rows(shape, history, z)
+        ok[ok] = feasible(system, z[ok])
+        found.append(z[ok])
+        count += int(ok.sum())
+        if count == 0:
+            break
+    return np.vstack(found)[:chains], spent
 
-    Decision: at most SEED_DESCENTS descents run per restart. With that many chains or fewer,
-    every chain gets its own seed; with more, descent stops once half are feasible and the
-    chains share those seeds round-robin (independent HMC momenta separate them within the
-    burn-in; slowly mixing MH / Gibbs should use <= SEED_DESCENTS chains).
 
-    Warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
-    history are used as seeds directly (distinct ones first); if none does, the first descent
-    starts from some of them instead of prior draws (they already satisfy most observations).
+def _typical(z: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(C,) whether seeds z are not far less likely under the prior than the ``reference``
+    seeds: |z|^2 at most max(m, median reference |z|^2) + SEED_Z2_MARGIN sqrt(2 m) (the
+    chi-square std). A seed at the reference median passes."""
+    m = z.shape[1]
+    level = max(float(m), float(np.median(np.sum(reference * reference, axis=1))))
+    return np.sum(z * z, axis=1) <= level + SEED_Z2_MARGIN * np.sqrt(2.0 * m)
+
+
+@dataclass
+class _Seeds:
+    z: np.ndarray | None  # (C, m) chain seeds; None if no restart reached feasibility
+    system: HistoryConstraints | None  # the pruned constraints (with the pairs seeds missed)
+    exact: np.ndarray  # (C,) seeds that are exact posterior draws (prior draws that fit)
+    best_z: np.ndarray | None = None  # best state of failed descents (for dropping)
+    warm: int = 0  # distinct warm-start rows used
+    distinct: int = 0  # distinct seeds
+    screened: int = 0  # feasible descent seeds discarded as atypical (``_typical``)
+
+
+def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None) -> _Seeds:
+    """Feasible seeds for the chains and the HistoryConstraints they were found on.
+
+    Decision (a seed in a feasible pocket of negligible mass traps every chain started from it;
+    HMC never leaves a pocket, so a longer burn-in does not help):
+    1. warm start: rows of ``init_z`` (e.g. the previous posterior's samples) that satisfy the
+       history are used directly (distinct ones first, shared round-robin if fewer than
+       ``chains`` but at least SEED_MIN_DISTINCT; with fewer, they seed one chain each and
+       descents seed the rest); the first descent starts from the other rows instead of prior
+       draws (they already satisfy most observations);
+    2. exact seeds (without ``init_z`` rows): prior draws that satisfy the history are posterior
+       draws, so chains seeded by them are in each pocket with its posterior probability
+       (``_exact_seeds``: a bounded budget, skipped when the first batch has no hit);
+    3. the remaining chains get one descent each: prior draws projected onto the contacts,
+       then random descent. Beyond SEED_DESCENTS remaining chains, SEED_DESCENTS descents run
+       per restart, stop once half of them are feasible, and the chains share the descent
+       seeds round-robin (descents are the costly part of seeding). A feasible descent
+       seed far less likely under the prior than the typical seed (``_typical``; exact and
+       warm seeds count as typical) is discarded; descents restart until SEED_MIN_DISTINCT
+       seeds (with the warm / exact ones) are kept, so that one pocket seed holds less than
+       half of the chains and the check after the run can tell which chains are trapped.
+    Pocket chains that get past this are caught after the run (``convergence``) and re-seeded.
 
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
-    Returns (z, system, best_z, best_count, distinct warm seeds used) with z None when no restart
-    reached feasibility.
     """
     pairs = prune_pairs(shape, history, threshold)
+    system = HistoryConstraints(shape, history, pairs)
+    none = np.zeros(chains, dtype=bool)
+    warm = np.zeros((0, shape.n_basis))
+    pool = np.zeros((0, shape.n_basis))  # warm or exact seeds, one chain each
+    if init_z is not None and len(init_z):
+        pool, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
+        if len(pool) >= min(chains, SEED_MIN_DISTINCT):
+            z = pool[np.arange(chains) % len(pool)]
+            return _Seeds(z, system, none, warm=len(pool), distinct=len(pool))
+    exact = init_z is None or not len(init_z)
+    if exact:  # rows of the previous posterior start far closer than prior draws
+        pool, _ = _exact_seeds(shape, history, system, chains, rng)
+    if len(pool) == chains:
+        return _Seeds(pool, system, ~none, distinct=chains)
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
-    tries = min(chains, SEED_DESCENTS)
-    warm = np.zeros((0, shape.n_basis))
-    if init_z is not None and len(init_z):
-        system = HistoryConstraints(shape, history, pairs)
-        good, warm = _warm_seeds(shape, history, system, init_z, chains, rng)
-        if len(good):
-            return good[np.arange(chains) % len(good)], system, good[0], 0, len(good)
+    tries = min(chains - len(pool), SEED_DESCENTS)
+    found = np.zeros((0, shape.n_basis))  # feasible descent seeds so far
+    good = found
     for attempt in range(restarts):
-        system = HistoryConstraints(shape, history, pairs)
         start = warm[:tries] if attempt == 0 and len(warm) else shape.sample_z(rng, tries)
         z0 = _contact_projection(shape, history, start)
-        enough = tries if chains <= SEED_DESCENTS else max(1, tries // 2)
+        enough = tries if tries == chains - len(pool) else max(1, tries // 2)
         z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
@@ -480,17 +554,119 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
         missed = free & np.any(full.pair_violations(z[count == 0]) > 0, axis=0)
         if missed.any():
             pairs = np.unique(np.vstack([pairs, all_pairs[missed]]), axis=0)
-        if ok.any():
-            good = z[ok]
             system = HistoryConstraints(shape, history, pairs)
-            return good[np.arange(chains) % len(good)], system, good[0], 0, 0
-        full_count = np.sum(
-            observation_violations(shape.closed, shape.vertices(z), history, shape.friction) > 0,
-            axis=1,
+        found = np.vstack([found, z[ok]])
+        if len(found):
+            good = found[_typical(found, np.vstack([pool, found]))]
+        if len(good) and len(pool) + len(good) >= min(SEED_MIN_DISTINCT, chains):
+            break
+        if not ok.any():
+            full_count = np.sum(
+                observation_violations(shape.closed, shape.vertices(z), history, shape.friction)
+                > 0,
+                axis=1,
+            )
+            if full_count.min() < best_count:
+                best_count, best_z = full_count.min(), z[np.argmin(full_count)]
+    warm_used = 0 if exact else len(pool)
+    if len(good):
+        fill = good[np.arange(chains - len(pool)) % len(good)]
+        return _Seeds(
+            np.vstack([pool, fill]),
+            system,
+            (np.arange(chains) < len(pool)) & exact,
+            warm=warm_used,
+            distinct=len(pool) + len(good),
+            screened=len(found) - len(good),
         )
-        if full_count.min() < best_count:
-            best_count, best_z = full_count.min(), z[np.argmin(full_count)]
-    return None, None, best_z, best_count, 0
+    if len(pool):  # descent failed, but some chains have exact or warm seeds: share those
+        z = pool[np.arange(chains) % len(pool)]
+        return _Seeds(z, system, none | exact, warm=warm_used, distinct=len(pool))
+    return _Seeds(None, None, none, best_z=best_z)
+
+
+class _ChainRun:
+    """Runs chains from given seeds to ``per_chain`` verified draws each (burn-in first); every
+    draw is checked against the whole history and dropped if it fails. Counts steps per chain,
+    chain moves and verified draws over all calls."""
+
+    def __init__(self, runner, shape, history, per_chain, thin, burn_in, max_steps):
+        self.runner, self.shape, self.history = runner, shape, history
+        self.per_chain, self.thin, self.burn_in = per_chain, thin, burn_in
+        self.max_steps = max_steps
+        self.steps = self.moves = self.verified = 0
+
+    def __call__(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Draws (C, L, m), L the fewest verified draws of any chain, and the last states."""
+        chains, m = z.shape
+        chain_draws = [[] for _ in range(chains)]
+        steps = 0
+        while min(len(c) for c in chain_draws) < self.per_chain and steps < self.max_steps:
+            need = self.per_chain - min(len(c) for c in chain_draws)
+            count = min(need, self.max_steps - steps)
+            burn = 0 if steps else self.burn_in
+            block = self.runner.run(z, count, thin=self.thin, burn_in=burn)  # (C, B, m)
+            z, steps = block[:, -1], steps + count
+            ok = _consistent_rows(self.shape, self.history, block.reshape(-1, m))
+            ok = ok.reshape(chains, -1)
+            self.verified += int(ok.sum())
+            for c in range(chains):  # one list append per chain and block
+                chain_draws[c].extend(block[c, ok[c]])
+        self.steps += steps
+        self.moves += steps * chains
+        length = min(len(c) for c in chain_draws)
+        return np.array([c[:length] for c in chain_draws]).reshape(chains, length, m), z
+
+
+def _reseed_trapped(run, draws, last, exact, rng):
+    """Checks the chains (``convergence``) and re-seeds trapped ones from the last states of
+    random other chains, reruns them (with burn-in) and splices their draws in: at most
+    RESEED_ROUNDS rounds. Chains with exact seeds are not re-seeded (they are in their pocket
+    with its posterior probability). Logs a warning when chains disagree.
+
+    Returns the draws (C, L, m) and the Convergence report."""
+    shape = run.shape
+    reseeded, rounds = 0, 0
+    while True:
+        coords = draws @ shape.basis.T + shape.mean
+        trapped = np.setdiff1d(trapped_chains(coords), np.flatnonzero(exact))
+        if trapped.size == 0 or rounds == RESEED_ROUNDS:
+            break
+        rounds += 1
+        reseeded += trapped.size
+        good = np.setdiff1d(np.arange(len(draws)), trapped)
+        new, new_last = run(last[rng.choice(good, trapped.size)])
+        length = min(draws.shape[1], new.shape[1])
+        draws = draws[:, :length].copy()
+        draws[trapped] = new[:, :length]
+        last = last.copy()
+        last[trapped] = new_last
+        LOG.warning(
+            "%d of %d %s chains trapped away from the others: re-seeded from other chains "
+            "(round %d of %d)",
+            trapped.size,
+            len(draws),
+            run.runner.method,
+            rounds,
+            RESEED_ROUNDS,
+        )
+    rhat = split_rhat(coords)
+    report = Convergence(
+        rhat=float(np.max(rhat)) if rhat.size else float("nan"),
+        rhat_limit=rhat_limit(*coords.shape),
+        trapped=int(trapped.size),
+        reseeded=reseeded,
+        rounds=rounds,
+    )
+    if not report.converged:
+        LOG.warning(
+            "%s chains disagree: split R-hat %.3f (limit %.2f), %d trapped chains",
+            run.runner.method,
+            report.rhat,
+            report.rhat_limit,
+            report.trapped,
+        )
+    return draws, report
 
 
 def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
@@ -542,13 +718,16 @@ def sample_posterior(
     (random walk, step adapted during burn-in), "rejection" (i.i.d. prior draws, at most
     ``max_draws``; may return fewer samples, even none, if the posterior is too unlikely).
 
-    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from seeds
-    found by random descent of f_H. If ``seed_restarts`` descents
-    all fail, the history is taken as inconsistent (sensor error): the observations violated by
-    the best state found are dropped (``dropped``) and sampling continues without them. Every
-    returned sample satisfies every kept observation under the exact geometric test. An empty
-    history returns exact prior draws. ``max_steps`` (default 50 n / chains + 1000) bounds the
-    MCMC steps per chain; fewer samples are returned if verification keeps failing.
+    ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from prior
+    draws that fit the history or from seeds found by random descent of f_H (``_seed``); after
+    the run, chains trapped away from the others are re-seeded and rerun, and split R-hat is
+    checked (``convergence``, logged as a warning when the chains disagree). If
+    ``seed_restarts`` descents all fail, the history is taken as inconsistent (sensor error):
+    the observations violated by the best state found are dropped (``dropped``) and sampling
+    continues without them. Every returned sample satisfies every kept observation under the
+    exact geometric test. An empty history returns exact prior draws. ``max_steps`` (default
+    50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
+    verification keeps failing.
 
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
     observations, seeds the chains: its rows consistent with the history (the previous
@@ -595,15 +774,13 @@ def sample_posterior(
         if len(sub) == 0:
             info["dropped_all"] = True
             return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-        z, system, best_z, _, distinct = _seed(
-            shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z
-        )
-        if z is not None:
+        seeds = _seed(shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z)
+        if seeds.z is not None:
             break
         violated = (
-            observation_violations(shape.closed, shape.vertices(best_z[None]), sub, shape.friction)[
-                0
-            ]
+            observation_violations(
+                shape.closed, shape.vertices(seeds.best_z[None]), sub, shape.friction
+            )[0]
             > 0
         )
         dropped = np.sort(np.concatenate([dropped, kept_idx[violated]]))
@@ -612,26 +789,17 @@ def sample_posterior(
         raise RuntimeError("no history-consistent seed found even after dropping observations")
 
     per_chain = -(-n_samples // chains)
-    warm = init_z is not None and distinct >= chains
+    warm = init_z is not None and seeds.warm >= chains
     if burn_in is None:
         burn_in = ({"hmc": 1, "gibbs": 1, "mh": 50} if warm else {"hmc": 3, "gibbs": 5, "mh": 200})[
             method
         ]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
-    runner = ChainRunner(system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
-    chain_draws = [[] for _ in range(chains)]
-    steps = 0
-    while min(len(c) for c in chain_draws) < per_chain and steps < max_steps:
-        need = per_chain - min(len(c) for c in chain_draws)
-        count = min(need, max_steps - steps)
-        block = runner.run(z, count, thin=thin, burn_in=0 if steps else burn_in)  # (C, B, m)
-        z, steps = block[:, -1], steps + count
-        ok = _consistent_rows(shape, sub, block.reshape(-1, shape.n_basis))
-        ok = ok.reshape(chains, -1)
-        for c in range(chains):  # C is small (a handful of chains)
-            chain_draws[c].extend(block[c, ok[c]])
-    length = min(len(c) for c in chain_draws)
-    draws = np.array([c[:length] for c in chain_draws]).reshape(chains, length, shape.n_basis)
+    runner = ChainRunner(seeds.system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
+    run = _ChainRun(runner, shape, sub, per_chain, thin, burn_in, max_steps)
+    draws, last = run(seeds.z)
+    draws, convergence = _reseed_trapped(run, draws, last, seeds.exact, rng)
+    chains, length = draws.shape[:2]
     z = draws.swapaxes(0, 1).reshape(-1, shape.n_basis)[:n_samples]
     vertices = shape.vertices(z)
     if length >= 2:
@@ -641,13 +809,18 @@ def sample_posterior(
         ess = float(len(z))
     info.update(
         runner.stats,
-        steps=steps,
+        steps=run.steps,
         burn_in=burn_in,
-        pairs=system.n_pairs,
-        warm_seeds=distinct if init_z is not None else 0,
+        pairs=seeds.system.n_pairs,
+        warm_seeds=seeds.warm if init_z is not None else 0,
+        exact_seeds=int(seeds.exact.sum()),
+        distinct_seeds=seeds.distinct,
+        screened_seeds=seeds.screened,
         pairs_total=len(sub) * shape.n_edges,
-        verified_fraction=sum(len(c) for c in chain_draws) / max(steps * chains, 1),
+        verified_fraction=run.verified / max(run.moves, 1),
     )
     if method == "mh":
         info["mh_scale"] = float(runner.scale)
-    return PosteriorSamples(z, vertices, method, ess, time.perf_counter() - start, dropped, info)
+    return PosteriorSamples(
+        z, vertices, method, ess, time.perf_counter() - start, dropped, info, convergence
+    )

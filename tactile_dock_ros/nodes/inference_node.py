@@ -16,14 +16,19 @@ from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
 from tactile_dock_ros.core.history import History
-from tactile_dock_ros.core.sampling import sample_posterior
+from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 from tactile_dock_ros.nodes import convert, markers, qos
 from tactile_dock_ros.nodes.common import guarded, header, run
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
-    Param("method", "hmc", "posterior sampler", choices=("hmc", "gibbs", "mh", "rejection")),
+    Param(
+        "method",
+        "hmc",
+        "posterior sampler (not mh: a benchmark baseline whose chains barely move)",
+        choices=NODE_METHODS,
+    ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param("marker_samples", 20, "samples drawn as RViz line strips", "", 0, 1000),
@@ -136,8 +141,16 @@ class InferenceNode(Node):
         self.get_logger().info(
             f"episode {self.episode} cycle {len(self.handled_plans) + 1}: history "
             f"{len(self.history)} segments, {len(posterior.vertices)} {posterior.method} samples, "
-            f"ESS {posterior.ess:.1f}, {posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
+            f"ESS {posterior.ess:.1f}, R-hat {posterior.convergence.rhat:.3f}, "
+            f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
         )
+        check = posterior.convergence
+        if check.reseeded or not check.converged:
+            self.get_logger().warning(
+                f"posterior chains disagreed: {check.reseeded} trapped chains re-seeded in "
+                f"{check.rounds} rounds, {check.trapped} still trapped, split R-hat "
+                f"{check.rhat:.3f} (limit {check.rhat_limit:.3f})"
+            )
 
 
 def main(args: list[str] | None = None) -> int:

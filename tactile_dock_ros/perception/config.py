@@ -30,6 +30,12 @@ YAML / dict format (every key optional except ``extrinsic.T_plane_camera``)::
       samples: 256                       # constrained-HMC samples per stretch
       trajectories: 6                    # HMC trajectories per sample chain
       max_hidden_vertices: 30            # per stretch
+    surface:                # how the visible slice's vertices deviate from the true surface
+      depth_model: correlated            # or independent: one-pixel std per vertex (old model)
+      quantization_m: 0.001              # depth resolution of the image (16UC1: 1 mm)
+      bend_sigma_rad: 0.05               # std of the true surface's turn at a vertex
+      corner_threshold: 2.0              # measured turns beyond this many noise stds are corners
+      variance_kept: 0.995               # eigen-columns kept per visible run (fraction of trace)
     friction: 0.5                         # Coulomb coefficient given to the prior
 """
 
@@ -48,7 +54,10 @@ class PerceptionError(ValueError):
 
 
 def _positive(name: str, value: float, allow_zero: bool = False) -> float:
-    value = float(value)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise PerceptionError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         raise PerceptionError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0")
     return value
@@ -146,12 +155,38 @@ class OcclusionParams:
             raise PerceptionError("occlusion counts must be >= 1 (samples >= 2)")
 
 
+DEPTH_MODELS = ("correlated", "independent")
+
+
+@dataclass(frozen=True)
+class SurfaceParams:
+    """Surface model of the visible slice (``terrain_prior.surface_columns`` explains each)."""
+
+    depth_model: str = "correlated"
+    quantization_m: float = 0.001
+    bend_sigma_rad: float = 0.05
+    corner_threshold: float = 2.0
+    variance_kept: float = 0.995
+
+    def __post_init__(self) -> None:
+        if self.depth_model not in DEPTH_MODELS:
+            raise PerceptionError(
+                f"surface.depth_model must be one of {DEPTH_MODELS}, got {self.depth_model!r}"
+            )
+        _positive("surface.quantization_m", self.quantization_m, allow_zero=True)
+        _positive("surface.bend_sigma_rad", self.bend_sigma_rad)
+        _positive("surface.corner_threshold", self.corner_threshold, allow_zero=True)
+        if not 0.5 <= float(self.variance_kept) <= 1.0:
+            raise PerceptionError("surface.variance_kept must lie in [0.5, 1]")
+
+
 @dataclass(frozen=True)
 class PerceptionConfig:
     extrinsic: Extrinsic
     depth_noise: DepthNoise = field(default_factory=DepthNoise)
     slice: SliceParams = field(default_factory=SliceParams)
     occlusion: OcclusionParams = field(default_factory=OcclusionParams)
+    surface: SurfaceParams = field(default_factory=SurfaceParams)
     friction: float = 0.5
 
     @classmethod
@@ -181,6 +216,7 @@ class PerceptionConfig:
             ("depth_noise", DepthNoise),
             ("slice", SliceParams),
             ("occlusion", OcclusionParams),
+            ("surface", SurfaceParams),
         ):
             values = dict(data.get(key) or {})
             unknown = set(values) - {f.name for f in fields(kind)}

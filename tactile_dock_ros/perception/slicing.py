@@ -16,7 +16,10 @@ Steps (all numpy, one pass over the valid pixels):
 6. resample each visible run at the vertex spacing and put evenly spaced placeholder vertices
    (at least 3, chord / spacing - 1 when more) on the chord of each hidden stretch (the prior
    replaces them with the Brownian-bridge mean); the spacing grows until the vertex count
-   fits ``max_vertices``.
+   fits ``max_vertices``. Each visible vertex interpolates two bin medians with weights
+   ``(1 - l, l)``; it records the effective pixel count ``1 / ((1 - l)^2 / N_a + l^2 / N_b)``
+   of the bins' pixel counts N, so that the std of the vertex is the one-pixel std over
+   sqrt(that count) (times the median's efficiency factor, see ``terrain_prior``).
 For an extruded terrain, 3-D visibility from an off-plane camera equals 2-D visibility from its
 projection, so the bearing order is exact there; for a general scene it is the usual
 single-viewpoint approximation.
@@ -48,6 +51,8 @@ class TerrainSlice:
         camera_xy: (2,) camera centre projected into the plane.
         spacing_m: vertex spacing actually used.
         points: (k, 2) the ordered per-bin median points the slice was resampled from.
+        bin_pixels: (k,) int, how many pixels each of those bin medians aggregates.
+        pixels: (n,) effective pixel count of each vertex (see module docstring); 0 if hidden.
     """
 
     vertices: np.ndarray
@@ -56,6 +61,8 @@ class TerrainSlice:
     camera_xy: np.ndarray
     spacing_m: float
     points: np.ndarray
+    bin_pixels: np.ndarray
+    pixels: np.ndarray
 
 
 def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_width_m: float):
@@ -91,8 +98,18 @@ def band_points(depth_m: np.ndarray, K: np.ndarray, extrinsic: Extrinsic, half_w
     return cam @ R[:2].T + t[:2]
 
 
-def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: float):
-    """Per-bearing-bin median points, ordered by decreasing bearing: (k, 2)."""
+def profile_from_points(
+    points: np.ndarray, camera_xy: np.ndarray, spacing_m: float, jump_m: float = np.inf
+):
+    """Per-bearing-bin median points (k, 2), ordered by decreasing bearing, and pixel counts.
+
+    Each bin's point lies at the bin's mean bearing; its range is the median of the pixels'
+    ranges moved to that bearing along the bin's least-squares range-vs-bearing slope. On a
+    surface slanted to the rays the range changes across the bin by more than the depth noise,
+    and the plain median range, paired with the mean bearing, would be off the surface by a
+    bias that no pixel count averages away. A bin whose ranges span more than ``jump_m`` holds
+    a depth jump (two surfaces): a line through it means nothing, so it keeps the plain median.
+    """
     rel = points - camera_xy
     ref = rel.mean(axis=0)
     ref = ref / max(np.linalg.norm(ref), 1e-12)
@@ -100,15 +117,36 @@ def profile_from_points(points: np.ndarray, camera_xy: np.ndarray, spacing_m: fl
     rng = np.linalg.norm(rel, axis=1)
     bin_width = spacing_m / (2.0 * max(np.median(rng), 1e-6))
     bins = np.floor(bearing / bin_width).astype(np.int64)
-    order = np.lexsort((rng, -bins))  # decreasing bearing, increasing range inside a bin
+    order = np.argsort(-bins, kind="stable")  # decreasing bearing
     bins, rng, bearing = bins[order], rng[order], bearing[order]
     starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
     counts = np.diff(np.r_[starts, bins.size])
-    med_range = rng[starts + (counts - 1) // 2]
+    member = np.repeat(np.arange(len(starts)), counts)
     mean_bearing = np.add.reduceat(bearing, starts) / counts
+    d_bearing = bearing - mean_bearing[member]
+    d_range = rng - (np.add.reduceat(rng, starts) / counts)[member]
+    spread = np.add.reduceat(d_bearing**2, starts)
+    slope = np.add.reduceat(d_bearing * d_range, starts) / np.maximum(spread, 1e-300)
+    span = np.maximum.reduceat(rng, starts) - np.minimum.reduceat(rng, starts)
+    slope = np.where((spread > 0) & (span <= jump_m), slope, 0.0)
+    at_mean = rng - slope[member] * d_bearing
+    at_mean = at_mean[np.lexsort((at_mean, member))]  # sorted inside each bin
+    med_range = at_mean[starts + (counts - 1) // 2]
     c, s = np.cos(mean_bearing), np.sin(mean_bearing)
     dirs = np.stack([c * ref[0] - s * ref[1], s * ref[0] + c * ref[1]], axis=1)
-    return camera_xy + med_range[:, None] * dirs
+    return camera_xy + med_range[:, None] * dirs, counts
+
+
+def resample_run(run: np.ndarray, pixels: np.ndarray, count: int):
+    """``count`` vertices evenly spaced along a run of bin medians, and their effective pixel
+    counts ``1 / ((1 - l)^2 / N_a + l^2 / N_b)`` (the variance of a linear interpolation)."""
+    s = arc_length(run)
+    t = np.linspace(0.0, s[-1], count)
+    frac = np.interp(t, s, np.arange(len(run), dtype=float))
+    a = np.minimum(np.floor(frac).astype(int), len(run) - 2)
+    lam = frac - a
+    inv = (1 - lam) ** 2 / pixels[a] + lam**2 / pixels[a + 1]
+    return resample_polyline(run, count), 1.0 / inv
 
 
 def _layout(runs: list[np.ndarray], spacing: float, max_hidden: int):
@@ -134,10 +172,11 @@ def extract_slice(
             f"only {len(pts)} depth points lie in the plane's band; need {params.min_points}"
         )
     camera_xy = extrinsic.camera_centre[:2].copy()
-    profile = profile_from_points(pts, camera_xy, params.vertex_spacing_m)
+    profile, bin_pixels = profile_from_points(pts, camera_xy, params.vertex_spacing_m, params.gap_m)
     cut = np.flatnonzero(np.linalg.norm(np.diff(profile, axis=0), axis=1) > params.gap_m) + 1
     bounds = np.r_[0, cut, len(profile)]
-    runs = [profile[a:b] for a, b in itertools.pairwise(bounds) if b - a >= _MIN_RUN_BINS]
+    kept = [(a, b) for a, b in itertools.pairwise(bounds) if b - a >= _MIN_RUN_BINS]
+    runs = [profile[a:b] for a, b in kept]
     if not runs or sum(len(r) for r in runs) < 2:
         raise PerceptionError("the slice has too few visible points to form a terrain profile")
     spacing = params.vertex_spacing_m
@@ -149,16 +188,19 @@ def extract_slice(
         spacing *= 1.05 * total / params.max_vertices
     else:
         raise PerceptionError(f"cannot fit the slice into max_vertices={params.max_vertices}")
-    pieces, hidden, stretches, n = [], [], [], 0
-    for i, (run, count) in enumerate(zip(runs, run_counts, strict=True)):
+    pieces, hidden, pixels, stretches, n = [], [], [], [], 0
+    for i, ((lo, hi), count) in enumerate(zip(kept, run_counts, strict=True)):
         if i > 0:
-            a, b, k = pieces[-1][-1], run[0], hidden_counts[i - 1]
+            a, b, k = pieces[-1][-1], profile[lo], hidden_counts[i - 1]
             frac = np.arange(1, k + 1)[:, None] / (k + 1)
             pieces.append(a + frac * (b - a))
             hidden.append(np.ones(k, bool))
+            pixels.append(np.zeros(k))
             stretches.append((n - 1, n + k))
             n += k
-        pieces.append(resample_polyline(run, count))
+        verts, run_pixels = resample_run(profile[lo:hi], bin_pixels[lo:hi], count)
+        pieces.append(verts)
+        pixels.append(run_pixels)
         hidden.append(np.zeros(count, bool))
         n += count
     return TerrainSlice(
@@ -168,4 +210,6 @@ def extract_slice(
         camera_xy=camera_xy,
         spacing_m=float(spacing),
         points=profile,
+        bin_pixels=bin_pixels,
+        pixels=np.concatenate(pixels),
     )

@@ -7,11 +7,11 @@ Columns of A, in this order:
   camera (c_z != 0) turns the tilts rx, ry into in-plane translations ``(0, c_z rx)``,
   ``(-c_z ry, 0)``; tz moves the extruded terrain along itself and has no in-plane effect.
   The block is compressed by an SVD to its non-zero directions (same A A^T).
-- depth noise: one column per visible vertex along its viewing ray, std = the pixel depth std
-  sigma(z) scaled to the in-plane range (``sigma(z) |p - c|_xy / z``). Decision: the per-pixel
-  std is used even though a vertex is a median of several pixels, which keeps the band honest
-  about resampling and mixed pixels. Hidden vertices carry the linear interpolation of their
-  stretch's two end columns, so a hidden stretch moves with the ends it hangs from.
+- surface: the true surface's deviation from the slice (``surface``): by default a smoothed
+  mean and the correlated posterior columns of each visible run (noise of a median of N pixels,
+  a piecewise smooth surface prior); ``depth_model: independent`` gives the original one
+  column per visible vertex along its ray with one pixel's std. Hidden vertices interpolate
+  their stretch's end rows.
 - occlusion: per hidden stretch, the PCA columns of the constrained Brownian bridge
   (``bridge.occlusion_columns``); its sample mean replaces the chord placeholders in mu.
 """
@@ -25,8 +25,10 @@ import numpy as np
 from ..core import prior as core_prior
 from ..core.shape import GaussianShape
 from .bridge import Sampler, occlusion_columns, sample_truncated_gaussian
-from .config import DepthNoise, Extrinsic, OcclusionParams, PerceptionConfig
+from .config import DepthNoise, Extrinsic, OcclusionParams, PerceptionConfig, SurfaceParams
+from .geometry import perturb_pose
 from .slicing import TerrainSlice, extract_slice
+from .surface import surface_columns
 
 
 def calibration_jacobian(vertices: np.ndarray, camera_centre: np.ndarray) -> np.ndarray:
@@ -55,28 +57,32 @@ def calibration_columns(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarra
     return u[:, keep] * sv[keep]
 
 
-def camera_depths(vertices: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
-    """(n,) optical-axis depth (metres) of plane points (x, y, 0) in the nominal camera."""
-    rel = np.column_stack([vertices, np.zeros(len(vertices))]) - extrinsic.camera_centre
-    return rel @ extrinsic.rotation[:, 2]
+def calibration_transform(vertices: np.ndarray, extrinsic: Extrinsic):
+    """Mean shift (n, 2) and columns (2n, r) of the calibration error, without linearizing.
 
-
-def depth_noise_columns(
-    terrain: TerrainSlice, vertices: np.ndarray, extrinsic: Extrinsic, noise: DepthNoise
-) -> np.ndarray:
-    """(2n, n_visible) ray-noise columns; hidden rows interpolate their stretch's end rows."""
-    visible = np.flatnonzero(~terrain.hidden)
-    v = vertices[visible]
-    z = np.maximum(camera_depths(v, extrinsic), 1e-6)
-    sigma = noise.sigma(z) * np.linalg.norm(v - terrain.camera_xy, axis=1) / z
-    rows = core_prior.ray_columns(v, terrain.camera_xy, sigma).reshape(len(visible), 2, -1)
-    cols = np.zeros((len(vertices), 2, len(visible)))
-    cols[visible] = rows
-    for first, last in terrain.stretches:
-        inner = np.arange(first + 1, last)
-        lam = ((inner - first) / (last - first))[:, None, None]
-        cols[inner] = (1 - lam) * cols[first] + lam * cols[last]
-    return cols.reshape(2 * len(vertices), -1)
+    The unscented transform of the exact map: a vertex believed at p (nominal pose) is truly at
+    ``T(delta) T_nominal^-1 p`` (``geometry.perturb_pose``; an extruded terrain, so only the
+    in-plane part counts), evaluated at the 12 sigma points ``+-sqrt(6)`` eigen-stds of the
+    extrinsic covariance. Rotations of 1-2 degrees at a metre's range move points by up to
+    half a millimetre more than ``calibration_columns`` says (``r phi^2 / 2``), which is more
+    than a well-averaged face's own noise; this keeps that second-order part (mean and spread).
+    """
+    values, vectors = np.linalg.eigh(extrinsic.covariance)
+    root = vectors * np.sqrt(6.0 * np.clip(values, 0.0, None))
+    T = extrinsic.T_plane_camera
+    back = np.linalg.inv(T)
+    points = np.column_stack([vertices, np.zeros(len(vertices)), np.ones(len(vertices))])
+    moved = (
+        np.stack(
+            [points @ (perturb_pose(T, sign * d) @ back).T for d in root.T for sign in (1.0, -1.0)]
+        )[:, :, :2]
+        - vertices
+    )  # (12, n, 2)
+    mean = moved.mean(axis=0)
+    spread = (moved - mean).reshape(len(moved), -1).T / np.sqrt(len(moved))
+    u, sv, _ = np.linalg.svd(spread, full_matrices=False)
+    keep = sv > 1e-6 * max(sv.max(initial=0.0), 1e-300)
+    return mean, u[:, keep] * sv[keep]
 
 
 def build_prior(
@@ -87,9 +93,16 @@ def build_prior(
     friction: float,
     rng: np.random.Generator,
     sampler: Sampler = sample_truncated_gaussian,
+    surface: SurfaceParams | None = None,
 ) -> GaussianShape:
-    """GaussianShape prior of a slice (columns: calibration, depth noise, occlusion)."""
-    verts = terrain.vertices.copy()
+    """GaussianShape prior of a slice (columns: calibration, surface, occlusion)."""
+    surface = surface or SurfaceParams()
+    verts, surface_block = surface_columns(terrain, extrinsic, noise, surface)
+    if surface.depth_model == "independent":
+        calibration = calibration_columns(verts, extrinsic)
+    else:
+        shift, calibration = calibration_transform(verts, extrinsic)
+        verts = verts + shift
     n = len(verts)
     blocks = []
     for first, last in terrain.stretches:
@@ -111,8 +124,8 @@ def build_prior(
         blocks.append(block)
     basis = np.hstack(
         [
-            calibration_columns(verts, extrinsic),
-            depth_noise_columns(terrain, verts, extrinsic, noise),
+            calibration,
+            surface_block,
             *blocks,
         ]
     )
@@ -140,5 +153,13 @@ def perceive(
     terrain = extract_slice(
         depth, K, config.extrinsic, config.slice, config.occlusion.max_hidden_vertices
     )
-    prior = build_prior(terrain, config.extrinsic, noise, config.occlusion, config.friction, rng)
+    prior = build_prior(
+        terrain,
+        config.extrinsic,
+        noise,
+        config.occlusion,
+        config.friction,
+        rng,
+        surface=config.surface,
+    )
     return Perception(terrain, prior)

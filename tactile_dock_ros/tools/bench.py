@@ -30,6 +30,7 @@ SUITES = {
     "docking": "Fig. 13: ours vs growing window vs info gain, cycles and success per problem",
     "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
+    "prior": "depth prior calibration: 2-sigma coverage, NLL, energy score, old vs new model",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
 }

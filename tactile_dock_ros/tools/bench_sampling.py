@@ -1,7 +1,8 @@
 """Posterior sampling benchmark (paper Fig. 9): EST = seconds / ESS of rejection, MH, Gibbs and
 HMC on three Sloper problems of increasing restriction and on three_ledges after 10 probes, plus
 the HMC throughput (effective samples per second, one thread) on that posterior over several
-runs, and our HMC against the PyPI package tmg-hmc on a Brownian bridge constrained to y <= 0.
+runs, our HMC against the PyPI package tmg-hmc on a Brownian bridge constrained to y <= 0, and
+the seeding check: HMC and Gibbs means on Fig. 9 problem 2 over many seeds against rejection.
 
 Every number is a median over --repeats runs with different seeds (the throughput: over
 --throughput-repeats runs; chains per method: CHAINS).
@@ -22,9 +23,9 @@ from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.sampling import METHODS, ChainRunner, sample_posterior
 from tactile_dock_ros.core.sampling_problems import fig9_problem, three_ledges_after_probes
 
-# HMC decorrelates within a move, so many chains share few seeds (None: the default, 16 to 256
-# by sample count); the slowly mixing MH and Gibbs chains each get their own seed
-# (SEED_DESCENTS = 4), or their ESS would be inflated.
+# HMC decorrelates within a move, so many chains may share seeds (None: the default, 16 to 256
+# by sample count); the slowly mixing MH and Gibbs chains each get their own seed (<=
+# SEED_DESCENTS chains), or their ESS would be inflated.
 CHAINS = {"hmc": None, "gibbs": 4, "mh": 4, "rejection": 1}
 
 
@@ -63,6 +64,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--bridge-samples", type=int, default=1000, help="bridge samples")
     parser.add_argument(
         "--skip-tmg", action="store_true", help="skip the tmg-hmc comparison (not installed)"
+    )
+    parser.add_argument(
+        "--check-seeds",
+        type=int,
+        default=40,
+        help="seeds of the Fig. 9 problem 2 posterior check against rejection (0: skip)",
+    )
+    parser.add_argument(
+        "--check-samples", type=int, default=2000, help="samples per run of the posterior check"
     )
 
 
@@ -268,6 +278,53 @@ def _warm_start(args) -> dict:
     return out
 
 
+def _posterior_check(args) -> dict:
+    """Seeding check (issue 12): Fig. 9 problem 2, HMC and Gibbs with default options over
+    --check-seeds seeds against one long rejection run (20000 samples). Per run: the largest
+    standardized error of the marginal vertex means, |mean - mean_ref| / std_ref, and the
+    largest std ratio; per method: their maxima, the runs off by more than 0.3 std, the runs
+    that re-seeded trapped chains and the runs that warned (``Convergence.converged``)."""
+    problem, history = fig9_problem(2)
+    shape = problem.prior
+    ref = sample_posterior(shape, history, 20000, np.random.default_rng(12345), "rejection")
+    ref_x = ref.vertices.reshape(len(ref.z), -1)
+    mean, std = ref_x.mean(0), ref_x.std(0)
+    n = args.check_samples
+    print(f"\nFig. 9 problem 2: {n} samples x {args.check_seeds} seeds vs 20000 rejection draws")
+    head = ("method", "max err", "> 0.3", "max std ratio", "reseeded", "warned")
+    print(" ".join(f"{h:>{w}}" for h, w in zip(head, (7, 8, 6, 13, 8, 6), strict=True)))
+    out = {}
+    for method in ("hmc", "gibbs"):
+        runs = []
+        for seed in range(args.check_seeds):
+            post = sample_posterior(shape, history, n, np.random.default_rng(seed), method)
+            x = post.vertices.reshape(len(post.z), -1)
+            runs.append(
+                {
+                    "seed": seed,
+                    "mean_error": float(np.max(np.abs(x.mean(0) - mean) / std)),
+                    "std_ratio": float(np.max(x.std(0) / std)),
+                    "rhat": post.convergence.rhat,
+                    "reseeded": post.convergence.reseeded,
+                    "converged": post.convergence.converged,
+                }
+            )
+        summary = {
+            "max_mean_error": max(r["mean_error"] for r in runs),
+            "runs_over_0.3": sum(r["mean_error"] > 0.3 for r in runs),
+            "max_std_ratio": max(r["std_ratio"] for r in runs),
+            "runs_reseeded": sum(r["reseeded"] > 0 for r in runs),
+            "runs_warned": sum(not r["converged"] for r in runs),
+        }
+        out[method] = {"summary": summary, "runs": runs}
+        print(
+            f"{method:>7} {summary['max_mean_error']:>8.3f} {summary['runs_over_0.3']:>6} "
+            f"{summary['max_std_ratio']:>13.2f} {summary['runs_reseeded']:>8} "
+            f"{summary['runs_warned']:>6}"
+        )
+    return out
+
+
 def run(args) -> dict:
     print("Posterior sampling benchmark (wall times on this machine; medians over repeats)")
     problems_out = {}
@@ -297,4 +354,5 @@ def run(args) -> dict:
         "three_ledges_hmc_throughput": _ledges_throughput(args),
         "warm_start": _warm_start(args),
         "bridge": _bridge(args),
+        "posterior_check": _posterior_check(args) if args.check_seeds > 0 else {},
     }

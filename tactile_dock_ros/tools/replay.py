@@ -33,7 +33,7 @@ import yaml
 
 from ..core import planner
 from ..core.history import History
-from ..core.sampling import sample_posterior
+from ..core.sampling import METHODS, sample_posterior
 from ..core.shape import GaussianShape
 from . import bag, figures
 
@@ -302,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         help="override the motion model (default: as recorded in each plan)",
     )
     parser.add_argument("--resample", type=int, default=0, metavar="N", help="fresh samples")
-    parser.add_argument("--method", default="hmc", choices=("hmc", "gibbs", "mh", "rejection"))
+    parser.add_argument("--method", default="hmc", choices=METHODS)
     parser.add_argument("--seed", type=int, default=0, help="seed of --resample")
     parser.add_argument("--png", type=Path, help="write one panel per cycle")
     parser.add_argument("--json", type=Path, help="write the comparison as JSON")

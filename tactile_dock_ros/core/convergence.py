@@ -1,0 +1,113 @@
+"""Between-chain convergence checks of MCMC draws: split R-hat and trapped chains.
+
+A chain seeded in a feasible pocket that the sampler cannot leave (HMC never crosses an
+infeasible gap; the pocket may hold ~1e-5 of the posterior) keeps drawing from the pocket: its
+draws are feasible, so no per-sample check sees it, but its mean sits far from the other
+chains'. ``split_rhat`` measures the disagreement; ``trapped_chains`` names the chains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+RHAT_LIMIT = 1.1  # split R-hat above this: the chains disagree (Gelman et al., BDA3 ch. 11)
+RHAT_FALSE_ALARM = 0.01  # short chains: the limit rises to R-hat's 1 - this quantile for iid draws
+TRAPPED_STD = 4.0  # a chain whose mean is this many robust posterior std off is trapped
+MIN_DRAWS = 4  # per chain, for either check (two draws per split half)
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Convergence report of one ``sample_posterior`` call.
+
+    Attributes:
+        rhat: largest split R-hat over vertex coordinates of the returned draws (nan when the
+            chains are too short to check, or the draws are independent, e.g. rejection).
+        rhat_limit: the limit it was held to (``rhat_limit``).
+        trapped: chains still flagged as trapped in the returned draws.
+        reseeded: chains re-seeded (from other chains' states) and rerun, over all rounds.
+        rounds: re-seed rounds run (0: the first run passed).
+    """
+
+    rhat: float = float("nan")
+    rhat_limit: float = RHAT_LIMIT
+    trapped: int = 0
+    reseeded: int = 0
+    rounds: int = 0
+
+    @property
+    def converged(self) -> bool:
+        """No trapped chain and R-hat within its limit (or not measurable)."""
+        return self.trapped == 0 and not self.rhat > self.rhat_limit
+
+
+def split_rhat(draws: np.ndarray) -> np.ndarray:
+    """Per-coordinate split R-hat of draws (C chains, N steps, d) -> (d,); nan if N < MIN_DRAWS.
+
+    Each chain is split into halves, then R = sqrt(var+ / W) with W the mean within-half
+    variance and var+ = (n - 1) / n W + B / n (B / n the variance of the half means).
+    Coordinates that vary in no half get 1 if the halves agree, inf if they do not.
+    """
+    x = np.asarray(draws, dtype=float)
+    n, d = x.shape[1:]
+    if n < MIN_DRAWS:
+        return np.full(d, np.nan)
+    half = n // 2
+    parts = np.concatenate([x[:, :half], x[:, n - half :]], axis=0)  # (2C, half, d)
+    within = parts.var(axis=1, ddof=1).mean(axis=0)
+    between = parts.mean(axis=1).var(axis=0, ddof=1)  # B / n
+    var_plus = (half - 1) / half * within + between
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rhat = np.sqrt(var_plus / within)
+    still = within <= 1e-300
+    return np.where(still, np.where(between <= 1e-300, 1.0, np.inf), rhat)
+
+
+def rhat_limit(chains: int, draws: int, coords: int) -> float:
+    """The split R-hat limit for ``chains`` chains of ``draws`` draws in ``coords`` coordinates:
+    RHAT_LIMIT, or, if larger, the value that the largest of the coordinates' R-hat exceeds
+    with probability RHAT_FALSE_ALARM when every draw is independent.
+
+    Decision: with few draws per chain (the node's 100 samples are 16 chains of 7) R-hat of
+    perfectly mixed chains scatters well above 1.1 (median 1.12 over 24 coordinates), so a
+    fixed limit would warn on most calls. For iid N(0, s^2) draws in k = 2C halves of h,
+    R^2 = (h - 1) / h + F / h with F ~ F(k - 1, k (h - 1)) (between- over within-half
+    variance); the limit takes F's 1 - RHAT_FALSE_ALARM / coords quantile (Bonferroni).
+    """
+    half = draws // 2
+    k = 2 * chains
+    if half < 2 or chains < 1:
+        return RHAT_LIMIT
+    f = stats.f.ppf(1 - RHAT_FALSE_ALARM / max(coords, 1), k - 1, k * (half - 1))
+    return max(RHAT_LIMIT, float(np.sqrt((half - 1) / half + f / half)))
+
+
+def trapped_chains(draws: np.ndarray) -> np.ndarray:
+    """Indices of chains (C, N, d) whose mean is more than TRAPPED_STD robust posterior
+    standard deviations from the median chain mean in some coordinate (empty if N < MIN_DRAWS
+    or if half the chains or more would be flagged: then no majority says where the
+    posterior is).
+
+    Decision: the robust std is 1.4826 x the median absolute deviation of all draws, so a
+    minority of trapped chains does not widen it. A mixing chain's mean over N >= 4 draws
+    lies within a couple of std of the centre; one 4 std off has (nearly) all its draws
+    where the other chains put almost no mass. This treats a genuinely separate mode that
+    only a minority of chains reached as a trap: with HMC no chain can cross into or out of
+    it, so its share of the chains would reflect the seeding, not its posterior mass anyway.
+    """
+    x = np.asarray(draws, dtype=float)
+    c, n, d = x.shape
+    if n < MIN_DRAWS or c < 3:
+        return np.zeros(0, dtype=int)
+    flat = x.reshape(-1, d)
+    centre = np.median(flat, axis=0)
+    scale = 1.4826 * np.median(np.abs(flat - centre), axis=0)
+    means = x.mean(axis=1)
+    off = np.abs(means - np.median(means, axis=0))
+    varies = scale > 1e-12 * (1 + np.abs(centre))
+    far = np.any(varies & (off > TRAPPED_STD * np.where(varies, scale, 1.0)), axis=1)
+    flagged = np.flatnonzero(far)
+    return flagged if 2 * flagged.size < c else np.zeros(0, dtype=int)

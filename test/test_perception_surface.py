@@ -1,0 +1,164 @@
+"""Depth prior surface model: pixel-count noise, correlation along the surface, calibration."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.perception import evaluation, scenes
+from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError, SurfaceParams
+from tactile_dock_ros.perception.geometry import point_segment_distances
+from tactile_dock_ros.perception.render import render_depth
+from tactile_dock_ros.perception.slicing import band_points, extract_slice, profile_from_points
+from tactile_dock_ros.perception.surface import ray_sigma, surface_columns
+from tactile_dock_ros.perception.terrain_prior import perceive
+from tactile_dock_ros.tools import bench_prior
+
+CONFIG = PerceptionConfig.load(bench_prior.MOCK_CONFIG)
+K = bench_prior.mock_intrinsics()
+
+
+def _with_model(model, **surface):
+    return dataclasses.replace(
+        CONFIG, surface=dataclasses.replace(CONFIG.surface, depth_model=model, **surface)
+    )
+
+
+def _slice(terrain, seed=0):
+    depth = render_depth(
+        terrain,
+        K,
+        CONFIG.extrinsic.T_plane_camera,
+        bench_prior.IMAGE,
+        np.random.default_rng(seed),
+        CONFIG.depth_noise,
+    )
+    return extract_slice(depth, K, CONFIG.extrinsic, CONFIG.slice)
+
+
+def test_vertex_noise_is_that_of_a_median_of_its_pixels():
+    sl = _slice(problems.get("sloper").sample_ground_truth(np.random.default_rng(1)))
+    visible = ~sl.hidden
+    assert np.all(sl.pixels[visible] >= 2) and np.all(sl.pixels[sl.hidden] == 0)
+    assert sl.bin_pixels.sum() >= sl.pixels[visible].sum() / 2
+    exact = SurfaceParams(quantization_m=0.0)
+    one_pixel = ray_sigma(sl, CONFIG.extrinsic, CONFIG.depth_noise, SurfaceParams("independent"))
+    median = ray_sigma(sl, CONFIG.extrinsic, CONFIG.depth_noise, exact)
+    np.testing.assert_allclose(
+        median[visible], 1.2533 * one_pixel[visible] / np.sqrt(sl.pixels[visible]), rtol=1e-4
+    )
+    more = dataclasses.replace(sl, pixels=4 * sl.pixels)
+    quartered = ray_sigma(more, CONFIG.extrinsic, CONFIG.depth_noise, exact)
+    np.testing.assert_allclose(quartered[visible], median[visible] / 2)
+    # The depth resolution is a floor that no pixel count averages away.
+    floor = ray_sigma(
+        dataclasses.replace(sl, pixels=1e9 * sl.pixels),
+        CONFIG.extrinsic,
+        CONFIG.depth_noise,
+        SurfaceParams(),
+    )
+    assert np.all(floor[visible] > 0.9 * 0.001 / np.sqrt(12))
+
+
+def test_bin_medians_are_taken_at_the_mean_bearing():
+    """On a wall slanted to the rays the plain median range (paired with the bin's mean
+    bearing) is off the wall by up to a millimetre and a half; the slope-corrected one is not."""
+    wall = np.array([[0.3, -0.5], [-0.3, 0.3]])
+    depth = render_depth(
+        wall, K, CONFIG.extrinsic.T_plane_camera, bench_prior.IMAGE, np.random.default_rng(0)
+    )
+    pts = band_points(depth, K, CONFIG.extrinsic, CONFIG.slice.band_half_width_m)
+    camera = CONFIG.extrinsic.camera_centre[:2]
+    spacing = CONFIG.slice.vertex_spacing_m
+    corrected, counts = profile_from_points(pts, camera, spacing, jump_m=CONFIG.slice.gap_m)
+    plain, _ = profile_from_points(pts, camera, spacing, jump_m=0.0)  # every bin "a jump"
+    assert counts.sum() == len(pts)
+    assert point_segment_distances(corrected, wall).max() < 1e-4
+    assert point_segment_distances(plain, wall).max() > 5e-4
+
+
+def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
+    truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(2))
+    depth = render_depth(
+        truth,
+        K,
+        CONFIG.extrinsic.T_plane_camera,
+        bench_prior.IMAGE,
+        np.random.default_rng(0),
+        CONFIG.depth_noise,
+    )
+    priors = {
+        model: perceive(depth, K, _with_model(model), np.random.default_rng(1)).prior
+        for model in ("independent", "correlated")
+    }
+    std_old, corr_old = evaluation.edge_angle_stats(priors["independent"])
+    std_new, corr_new = evaluation.edge_angle_stats(priors["correlated"])
+    assert np.median(corr_old) < 0 < 0.3 < np.median(corr_new)
+    assert np.median(std_new) < 0.5 * np.median(std_old)
+    # Condition the surface columns on one face vertex lying 2 mm off along its normal: its
+    # neighbour follows it in the correlated model (one face), not in the independent one.
+    sl = perceive(depth, K, CONFIG, np.random.default_rng(1)).slice
+    moved = {}
+    for model in ("independent", "correlated"):
+        verts, cols = surface_columns(
+            sl, CONFIG.extrinsic, CONFIG.depth_noise, SurfaceParams(model)
+        )
+        A = cols.reshape(len(verts), 2, -1)
+        edge = verts[21] - verts[20]
+        normal = np.array([edge[1], -edge[0]]) / np.linalg.norm(edge)
+        a = normal @ A[20]
+        moved[model] = 0.002 * (normal @ A[21] @ a) / (a @ a)
+    assert moved["correlated"] > 0.001 and abs(moved["independent"]) < 1e-4, moved
+
+
+def test_coverage_in_band_and_nll_beats_the_independent_model():
+    """30 terrains (18 random walls, 4 truths per problem) with drawn calibration errors."""
+    rows = [
+        bench_prior.score_terrain(truth, CONFIG, K, "16UC1", 11 * i)
+        for i, (_, truth) in enumerate(bench_prior.terrains(18, 4, seed=3))
+    ]
+    covered = sum(r["correlated"]["covered"] for r in rows)
+    assert 0.93 <= covered / sum(r["correlated"]["points"] for r in rows) <= 0.99
+    old, new = (np.array([r[m]["nll_per_vertex"] for r in rows]) for m in bench_prior.MODELS)
+    assert new.mean() < old.mean() - 1.0, (old.mean(), new.mean())
+    assert np.mean(new < old) >= 0.8
+
+
+def test_matched_truth_undoes_the_calibration_error():
+    wall = np.array([[0.0, -1.0], [0.0, 2.0]])
+    mean = np.stack([np.full(5, 0.002), np.linspace(0.0, 0.4, 5)], axis=1)
+    error = np.r_[0.01, -0.01, 0.0, 0.0, 0.0, 0.02]
+    matched = evaluation.matched_truth(
+        mean, np.zeros(5, bool), wall, CONFIG.extrinsic.T_plane_camera, error
+    )
+    np.testing.assert_allclose(matched[:, 0], 0.0, atol=1e-12)
+    assert np.all(np.abs(matched[:, 1] - mean[:, 1]) > 0.005)  # the rigid part is kept
+
+
+@pytest.mark.parametrize(
+    ("surface", "message"),
+    [
+        ({"depth_model": "gp"}, "depth_model"),
+        ({"variance_kept": 0.1}, "variance_kept"),
+        ({"bend_sigma_rad": -1.0}, "bend_sigma_rad"),
+        ({"quantization_m": "fine"}, "quantization_m"),
+        ({"corner_threshold": float("nan")}, "corner_threshold"),
+        ({"bogus": 1}, "unknown keys"),
+    ],
+)
+def test_bad_surface_config_is_rejected(surface, message):
+    data = {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}, "surface": surface}
+    with pytest.raises(PerceptionError, match=message):
+        PerceptionConfig.from_dict(data)
+
+
+def test_default_is_correlated_and_scenes_still_perceive():
+    assert (
+        PerceptionConfig.from_dict(
+            {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}}
+        ).surface.depth_model
+        == "correlated"
+    )
+    sl = _slice(scenes.random_terrain(np.random.default_rng(4)) - [0.0, 0.3])
+    assert len(sl.pixels) == len(sl.vertices)
