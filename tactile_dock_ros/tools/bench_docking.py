@@ -81,7 +81,7 @@ def add_arguments(parser) -> None:
         help="camera extrinsic + covariance, depth noise (depth prior)",
     )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
-    parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 8")
+    parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
 
 
 @dataclass(frozen=True)
@@ -284,7 +284,7 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 
 def run(args) -> dict:
-    instances, max_cycles = (3, 8) if args.quick else (args.instances, args.max_cycles)
+    instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
     config = PerceptionConfig.load(args.perception_config) if "depth" in args.prior else None
     truths = {name: _truths(args, name, instances, config) for name in args.problems}
     keys = [
