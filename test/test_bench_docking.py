@@ -1,6 +1,8 @@
-"""The docking benchmark runs end to end on a tiny configuration and writes its JSON."""
+"""The docking benchmark runs end to end on tiny configurations and writes its JSON."""
 
 import json
+
+import pytest
 
 from tactile_dock_ros.tools import bench
 
@@ -8,6 +10,7 @@ from tactile_dock_ros.tools import bench
 def test_docking_bench_small(tmp_path):
     out = tmp_path / "docking.json"
     argv = ["docking", "--instances", "3", "--max-cycles", "4", "--problems", "notch"]
+    argv += ["--prior", "problem", "--mode", "compliant"]
     assert bench.main([*argv, "--strategies", "ours", "gw", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert [r["strategy"] for r in report["results"]] == ["ours", "gw"]
@@ -18,3 +21,90 @@ def test_docking_bench_small(tmp_path):
         assert 0 < row["cycle_seconds_median"] <= row["cycle_seconds_max"]
         later = [t for e in row["episodes"] for t in e["cycle_seconds"][1:]]
         assert (row["later_cycle_seconds_median"] is None) == (not later)
+    ours, gw = report["results"]
+    assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
+
+
+def _quick(tmp_path, name, *extra):
+    out = tmp_path / name
+    argv = ["docking", "--quick", "--problems", "notch", "--strategies", "ours", "--seed", "1"]
+    assert bench.main([*argv, *extra, "--json", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
+    report = _quick(tmp_path, "both.json", "--prior", "depth", "problem", "--workers", "2")
+    rows = {(r["prior"], r["mode"]): r for r in report["results"]}
+    assert set(rows) == {
+        (p, m) for p in ("depth", "problem") for m in ("compliant", "non-compliant")
+    }
+    assert all(r["instances"] == 3 and r["errors"] == 0 for r in rows.values())
+    truths = report["truths"]["notch"]
+    errors = [tuple(t["calibration_error"]) for t in truths]
+    assert len(set(errors)) == 3 and all(len(e) == 6 for e in errors)  # drawn per truth
+    assert all(t["depth_prior_vertices"] >= 2 for t in truths)
+    # the same seeds in one process give the same episodes and the same drawn errors
+    again = _quick(tmp_path, "depth.json", "--prior", "depth", "--mode", "non-compliant")
+    assert [tuple(t["calibration_error"]) for t in again["truths"]["notch"]] == errors
+    key = ("depth", "non-compliant")
+    strip = [{k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in rows[key]["episodes"]]
+    assert strip == [
+        {k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in again["results"][0]["episodes"]
+    ]
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
+     ["--samples", "1"], ["--max-cycles", "-2"]],
+)  # fmt: skip
+def test_bad_arguments_are_rejected(bad):
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(["docking", "--quick", *bad])
+    assert exit_info.value.code == 2
+
+
+def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
+    from tactile_dock_ros.tools import bench_docking
+
+    real, calls = bench_docking._episode, []
+
+    def stop_after_four(task):
+        calls.append(task)
+        if len(calls) > 4:
+            raise KeyboardInterrupt
+        return real(task)
+
+    monkeypatch.setattr(bench_docking, "_episode", stop_after_four)
+    report = _quick(tmp_path, "cut.json", "--prior", "problem", "--strategies", "ours", "gw")
+    assert report["unfinished_episodes"] == 3 * 2 * 2 - 4
+    # instance-major order: the first truth ran in both modes with both strategies
+    assert [len(r["episodes"]) for r in report["results"]] == [1, 1, 1, 1]
+    assert {t.instance for t in calls[:4]} == {0}
+
+
+def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "term.json"
+    argv = ["docking", "--quick", "--problems", "sloper", "--prior", "depth", "--json", str(out)]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "tactile_dock_ros.tools.bench", *argv],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),  # as `cmd &` in a script
+    )
+    for line in process.stderr:  # the first finished episode
+        if line.startswith("[1/"):
+            break
+    process.send_signal(signal.SIGTERM)
+    process.stderr.read()
+    assert process.wait(timeout=120) == 0
+    report = json.loads(out.read_text())
+    assert 0 < report["unfinished_episodes"] < 3 * 2 * 3
+    assert sum(len(r["episodes"]) for r in report["results"]) == 18 - report["unfinished_episodes"]

@@ -166,3 +166,12 @@ def test_feasible():
     assert simulate.feasible(sloper, FLAT)
     assert simulate.feasible(sloper, CORNER)
     assert not simulate.feasible(sloper, SLOPE_CLIFF[:3])
+
+
+def test_feasible_without_compliance_needs_a_first_contact_that_sticks():
+    sloper = problems.get("sloper")
+    # CORNER docks only by sliding into its corner; FLAT sticks where it is touched
+    assert simulate.feasible(sloper, CORNER) and simulate.feasible(sloper, NOTCH)
+    assert not simulate.feasible(sloper, CORNER, compliant=False)
+    assert not simulate.feasible(sloper, NOTCH, compliant=False)
+    assert simulate.feasible(sloper, FLAT, compliant=False)

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import planner, sampling, simulate
 from .history import History, Status
+from .shape import GaussianShape
 
 STRATEGIES = ("ours", "gw", "ig")
 
@@ -74,6 +75,7 @@ def run_episode(
     give_up_threshold: float = 1e-3,
     compliant: bool = True,
     keep_samples: int = 20,
+    prior: GaussianShape | None = None,
 ) -> EpisodeResult:
     """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
 
@@ -81,13 +83,16 @@ def run_episode(
     seed gives the same episode. Posterior chains are warm-started from the previous cycle's
     samples (``sampling.sample_posterior(init_z=...)``). The planner gets each row's cycle, so
     it drops samples on which a recorded compliant slide could not have happened (``slides``).
+    ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
+    image, ``perception.mock_camera.depth_prior``); the truth is still simulated with the
+    problem's load, friction, start and ``problem.prior.closed``.
     """
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose from {STRATEGIES}")
     if max_cycles < 1:
         raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
     rng = np.random.default_rng(0) if rng is None else rng
-    prior = problem.prior
+    prior = problem.prior if prior is None else prior
     history = History()
     move_ids = np.zeros(0, dtype=int)  # per history row: the cycle that observed it, from 1
     log: list[CycleLog] = []
@@ -137,7 +142,7 @@ def run_episode(
                 return _finish(history, log, "gave_up", decision.reason)
             run = simulate.guarded_path(
                 ground_truth,
-                prior.closed,
+                problem.prior.closed,
                 decision.path,
                 problem.friction,
                 problem.load,
@@ -150,7 +155,11 @@ def run_episode(
             evidence = run.observations
             if compliant and not run.docked:
                 evidence = slide_evidence(
-                    ground_truth, prior.closed, run, problem.load, problem.contact_resolution
+                    ground_truth,
+                    problem.prior.closed,
+                    run,
+                    problem.load,
+                    problem.contact_resolution,
                 )
             history = history.extend(evidence.a, evidence.b, evidence.status)
             move_ids = np.concatenate([move_ids, np.full(len(evidence), cycle + 1)])

@@ -299,13 +299,14 @@ def docking_lines(vertices, closed: bool, load, fractions=(0.1, 0.3, 0.5, 0.7, 0
     return points - reach * u, points + 1e-3 * reach * u
 
 
-def feasible(problem, ground_truth) -> bool:
+def feasible(problem, ground_truth, compliant: bool = True) -> bool:
     """Whether some loading move along ``problem.load`` docks on ``ground_truth`` (n, 2).
 
     Decision: a docking site must be reachable by a straight compliant loading move from outside
     the terrain's bounding box, so every edge is probed at five points by such a move (compliant
     slides included, so vertex traps count). Approach paths from ``problem.start`` are not
-    checked: the problems' starts are above the terrain, in the open.
+    checked: the problems' starts are above the terrain, in the open. ``compliant=False``: only
+    a move that sticks at its first contact docks (no slide into a vertex trap).
     """
     v = _validate_vertices(ground_truth, problem.prior.closed)
     starts, ends = docking_lines(v, problem.prior.closed, problem.load)
@@ -315,6 +316,6 @@ def feasible(problem, ground_truth) -> bool:
     if not np.any(hit):
         return False
     outcome, _, _ = slide_outcomes(
-        shapes[hit], problem.prior.closed, edge[hit], problem.load, problem.friction, True
+        shapes[hit], problem.prior.closed, edge[hit], problem.load, problem.friction, compliant
     )
     return bool(np.any((outcome == STUCK_EDGE) | (outcome == STUCK_VERTEX)))

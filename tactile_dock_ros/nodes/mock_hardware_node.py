@@ -41,7 +41,7 @@ from tactile_dock_ros.nodes.common import (
 from tactile_dock_ros.nodes.mock_physics import PointToolSim
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
-from tactile_dock_ros.perception.render import render_depth
+from tactile_dock_ros.perception.mock_camera import MockCamera
 
 PARAMS = [
     *PLANE_TABLE,
@@ -70,8 +70,16 @@ PARAMS = [
         length=6,
     ),
     Param("camera_rate_hz", 2.0, "depth image publication rate", "Hz", 0.1, 60.0),
-    Param("image_size", [320, 240], "depth image width, height", "px", 8, 4096, length=2),
-    Param("focal_px", 262.5, "focal length of the mock depth camera", "px", 1.0, 1e5),
+    Param(
+        "image_size",
+        [MockCamera.width, MockCamera.height],
+        "depth image width, height",
+        "px",
+        8,
+        4096,
+        length=2,
+    ),
+    Param("focal_px", MockCamera.focal_px, "focal length of the mock depth camera", "px", 1.0, 1e5),
 ]
 
 
@@ -131,24 +139,14 @@ class MockHardwareNode(Node):
             config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
-        width, height = self.p.image_size
-        f = self.p.focal_px
-        K = np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
-        depth = render_depth(
-            vertices,
-            K,
-            config.extrinsic.T_plane_camera,
-            (width, height),
-            self.rng,
-            config.depth_noise,
-            calibration_error=np.asarray(self.p.calibration_error),
-        )
+        camera = MockCamera(*self.p.image_size, self.p.focal_px)
+        depth = camera.render(vertices, config, np.asarray(self.p.calibration_error), self.rng)
         image_pub = self.create_publisher(Image, "depth/image", qos.SENSOR)
         info_pub = self.create_publisher(CameraInfo, "depth/camera_info", qos.SENSOR)
 
         def publish() -> None:
             stamp = header(self, "depth_camera")
-            info_pub.publish(convert.camera_info(K, width, height, stamp))
+            info_pub.publish(convert.camera_info(camera.K, camera.width, camera.height, stamp))
             image_pub.publish(convert.depth_to_image(depth, stamp))
 
         self.create_timer(1.0 / self.p.camera_rate_hz, publish)

@@ -1,31 +1,176 @@
 """Docking benchmark (paper Fig. 13, Sec. VI-A): ours vs growing window (GW) vs info gain (IG).
 
-For each problem, ``--instances`` ground truths are drawn from the prior (seeded); every strategy
-runs one episode per truth. Reported per problem and strategy: feasible count, success rate on
-feasible truths, cycles on feasible truths (mean, std, max), outcomes on infeasible truths
-(give-ups and their median cycles), and the wall time of one cycle (inference + planning):
-median over all cycles, median over the cycles after each episode's first (those have a
-history to condition on; first cycles plan on prior draws and take ~0.02 s, so they pull the
-overall median down whenever most episodes dock at once), and the maximum. Episodes are the
-repetitions, so ``--repeats`` is not used.
+For each problem, ``--instances`` ground truths are drawn from the problem's prior (seeded, the
+same truths whatever subset of problems runs). Every truth runs one episode per strategy, per
+prior and per mode:
+
+- prior ``problem``: the problem's hand-made prior; ``depth``: the prior the robot gets, the
+  truth rendered by the mock profile's depth camera (``--perception-config``, 320x240, focal
+  262.5 px) from a pose displaced by a calibration error drawn per truth from the configured
+  extrinsic covariance (seeded), then perceived (``perception.mock_camera.depth_prior``);
+- mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
+  (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml).
+
+Reported per problem, prior, mode and strategy: feasible count, success on feasible truths,
+cycles on feasible truths (mean, std, max), how infeasible truths end (the planner's give-up,
+its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's, and
+the wall time of one cycle (inference + planning): median over all cycles, over the cycles
+after each episode's first (with a history), and the maximum. With ``--workers N`` episodes run
+in N processes (per-episode seeds do not depend on N); cycle times are then per process on a
+machine running N episodes at once. Episodes are the repetitions: ``--repeats`` is not used.
 """
 
 from __future__ import annotations
 
+import argparse
+import functools
+import multiprocessing
+import signal
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
 from ..core import explore, problems, simulate
+from ..core.shape import GaussianShape
+from ..perception.config import PerceptionConfig, PerceptionError
+from ..perception.mock_camera import depth_prior
+
+PRIORS = ("problem", "depth")
+MODES = ("compliant", "non-compliant")
+PERCEPTION_CONFIG = Path(__file__).resolve().parents[2] / "config" / "perception_mock.yaml"
+
+
+def _at_least(minimum: int):
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
+        return value
+
+    return parse
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--instances", type=int, default=20, help="ground truths per problem")
-    parser.add_argument("--max-cycles", type=int, default=12, help="cycle cap per episode")
-    parser.add_argument("--samples", type=int, default=100, help="posterior samples per cycle")
+    parser.add_argument("--instances", type=_at_least(1), default=20, help="truths per problem")
+    parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
+    parser.add_argument("--samples", type=_at_least(2), default=100, help="posterior samples")
     parser.add_argument("--problems", nargs="+", default=problems.names(), choices=problems.names())
     parser.add_argument(
         "--strategies", nargs="+", default=list(explore.STRATEGIES), choices=explore.STRATEGIES
     )
-    parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 8")
+    parser.add_argument(
+        "--prior",
+        nargs="+",
+        default=list(PRIORS),
+        choices=PRIORS,
+        help="problem: the hand-made prior; depth: perceived from the mock camera",
+    )
+    parser.add_argument(
+        "--mode",
+        nargs="+",
+        default=list(MODES),
+        choices=MODES,
+        help="compliant: ideal compliance; non-compliant: the mock profile's",
+    )
+    parser.add_argument(
+        "--perception-config",
+        type=Path,
+        default=PERCEPTION_CONFIG,
+        help="camera extrinsic + covariance, depth noise (depth prior)",
+    )
+    parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
+    parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
+
+
+@dataclass(frozen=True)
+class _Task:
+    problem: str
+    prior_source: str
+    mode: str
+    strategy: str
+    instance: int
+    truth: np.ndarray
+    prior: GaussianShape | None  # None: no prior (perception failed)
+    feasible: bool  # simulate.feasible in this mode
+    seed: tuple[int, ...]
+    max_cycles: int
+    samples: int
+
+
+@functools.cache
+def _problem(name: str) -> problems.Problem:
+    return problems.get(name)
+
+
+def _episode(task: _Task) -> dict:
+    """One episode -> JSON record (``outcome`` 'perception_error' when there is no prior)."""
+    record = {"instance": task.instance, "seed": list(task.seed)}
+    if task.prior is None:
+        return {
+            **record,
+            "outcome": "perception_error",
+            "docked": False,
+            "cycles": 0,
+            "message": "no prior",
+            "p_dock": [],
+            "cycle_seconds": [],
+        }
+    result = explore.run_episode(
+        _problem(task.problem),
+        task.truth,
+        task.strategy,
+        np.random.default_rng(task.seed),
+        task.max_cycles,
+        n_samples=task.samples,
+        compliant=task.mode == "compliant",
+        prior=task.prior,
+    )
+    return {
+        **record,
+        "outcome": result.outcome,
+        "docked": result.docked,
+        "cycles": result.cycles,
+        "message": result.message,
+        "p_dock": [c.plan.p_dock for c in result.cycles_log],
+        "cycle_seconds": [c.inference_seconds + c.planning_seconds for c in result.cycles_log],
+    }
+
+
+def _truths(args, name: str, instances: int, config: PerceptionConfig | None) -> list[dict]:
+    """Per instance: truth, feasibility per mode and, when asked, its depth prior."""
+    p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
+    problem = _problem(name)
+    out = []
+    for i in range(instances):
+        truth = problem.sample_ground_truth(np.random.default_rng([args.seed, p_index, i]))
+        entry = {
+            "instance": i,
+            "truth": truth,
+            "feasible": {
+                mode: bool(simulate.feasible(problem, truth, mode == "compliant")) for mode in MODES
+            },
+            "seed": (args.seed, p_index, i, 1),
+        }
+        if config is not None:
+            try:
+                seen = depth_prior(truth, config, np.random.default_rng([args.seed, p_index, i, 2]))
+                entry["depth"] = seen.prior
+                entry["calibration_error"] = seen.calibration_error.tolist()
+            except PerceptionError as err:
+                entry["depth"], entry["perception_error"] = None, str(err)
+        out.append(entry)
+    return out
+
+
+def _truth_record(truth: dict) -> dict:
+    """The JSON part of a ``_truths`` entry: feasibility, calibration error, prior size."""
+    keep = ("instance", "feasible", "calibration_error", "perception_error")
+    record = {k: v for k, v in truth.items() if k in keep}
+    if truth.get("depth") is not None:
+        record["depth_prior_vertices"] = truth["depth"].n_vertices
+    return record
 
 
 def _summary(episodes: list[dict]) -> dict:
@@ -45,73 +190,156 @@ def _summary(episodes: list[dict]) -> dict:
         "cycles_std": float(cycles.std()) if len(cycles) else None,
         "cycles_max": int(cycles.max()) if len(cycles) else None,
         "infeasible_gave_up": len(give_up_cycles),
+        "infeasible_cycle_cap": sum(e["outcome"] == "cycle_cap" for e in infeasible),
         "infeasible_give_up_cycles_median": float(np.median(give_up_cycles))
         if give_up_cycles
         else None,
-        "errors": sum(e["outcome"] == "error" for e in episodes),
+        "errors": sum(e["outcome"] in ("error", "perception_error") for e in episodes),
         "cycle_seconds_median": float(np.median(cycle_times)) if cycle_times else None,
         "later_cycle_seconds_median": float(np.median(later_times)) if later_times else None,
         "cycle_seconds_max": float(np.max(cycle_times)) if cycle_times else None,
     }
 
 
+def _ratios(results: list[dict]) -> None:
+    """Ours' mean cycles over the better (lower) of GW and IG, per problem, prior and mode."""
+    groups: dict[tuple, dict[str, dict]] = {}
+    for row in results:
+        groups.setdefault((row["problem"], row["prior"], row["mode"]), {})[row["strategy"]] = row
+    for rows in groups.values():
+        baselines = [rows[s]["cycles_mean"] for s in ("gw", "ig") if s in rows]
+        baselines = [b for b in baselines if b is not None]
+        if "ours" in rows and baselines and rows["ours"]["cycles_mean"] is not None:
+            rows["ours"]["ours_over_best_baseline"] = rows["ours"]["cycles_mean"] / min(baselines)
+
+
 def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def run(args) -> dict:
-    instances, max_cycles = (3, 8) if args.quick else (args.instances, args.max_cycles)
-    print(
-        f"{'problem':13} {'strategy':8} {'feas':>5} {'succ':>5} {'cyc mean':>8} {'std':>5} "
-        f"{'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'err':>3} {'s/cycle':>7} {'later':>6} "
-        f"{'max s':>6}"
+HEADER = (
+    f"{'problem':13} {'prior':7} {'mode':13} {'strategy':8} {'feas':>5} {'succ':>5} "
+    f"{'cyc mean':>8} {'std':>5} {'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'cap':>3} "
+    f"{'err':>3} {'/best':>5} {'s/cycle':>7} {'later':>6} {'max s':>6}"
+)
+
+
+def _line(row: dict) -> str:
+    return (
+        f"{row['problem']:13} {row['prior']:7} {row['mode']:13} {row['strategy']:8} "
+        f"{row['feasible']:>2}/{row['instances']:<2} "
+        f"{_fmt(row['success_on_feasible'], '.0%'):>5} {_fmt(row['cycles_mean'], '.2f'):>8} "
+        f"{_fmt(row['cycles_std'], '.2f'):>5} {_fmt(row['cycles_max'], 'd'):>4} "
+        f"{row['infeasible_gave_up']:>5}/{row['instances'] - row['feasible']:<5} "
+        f"{_fmt(row['infeasible_give_up_cycles_median'], '.1f'):>7} "
+        f"{row['infeasible_cycle_cap']:>3} {row['errors']:>3} "
+        f"{_fmt(row.get('ours_over_best_baseline'), '.2f'):>5} "
+        f"{_fmt(row['cycle_seconds_median'], '.3f'):>7} "
+        f"{_fmt(row['later_cycle_seconds_median'], '.3f'):>6} "
+        f"{_fmt(row['cycle_seconds_max'], '.2f'):>6}"
     )
-    results = []
-    for name in args.problems:
-        p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
-        problem = problems.get(name)
-        truths = [
-            problem.sample_ground_truth(np.random.default_rng([args.seed, p_index, i]))
-            for i in range(instances)
-        ]
-        feasible = [simulate.feasible(problem, t) for t in truths]
-        for strategy in args.strategies:
-            episodes = []
-            for i, (truth, ok) in enumerate(zip(truths, feasible, strict=True)):
-                rng = np.random.default_rng([args.seed, p_index, i, 1])
-                result = explore.run_episode(
-                    problem, truth, strategy, rng, max_cycles, n_samples=args.samples
-                )
-                episodes.append(
-                    {
-                        "instance": i,
-                        "feasible": bool(ok),
-                        "outcome": result.outcome,
-                        "docked": result.docked,
-                        "cycles": result.cycles,
-                        "message": result.message,
-                        "cycle_seconds": [
-                            c.inference_seconds + c.planning_seconds for c in result.cycles_log
-                        ],
-                    }
-                )
-            s = _summary(episodes)
-            print(
-                f"{name:13} {strategy:8} {s['feasible']:>2}/{s['instances']:<2} "
-                f"{_fmt(s['success_on_feasible'], '.0%'):>5} {_fmt(s['cycles_mean'], '.2f'):>8} "
-                f"{_fmt(s['cycles_std'], '.2f'):>5} {_fmt(s['cycles_max'], 'd'):>4} "
-                f"{s['infeasible_gave_up']:>5}/{s['instances'] - s['feasible']:<5} "
-                f"{_fmt(s['infeasible_give_up_cycles_median'], '.1f'):>7} {s['errors']:>3} "
-                f"{_fmt(s['cycle_seconds_median'], '.3f'):>7} "
-                f"{_fmt(s['later_cycle_seconds_median'], '.3f'):>6} "
-                f"{_fmt(s['cycle_seconds_max'], '.2f'):>6}",
-                flush=True,
-            )
-            results.append({"problem": name, "strategy": strategy, **s, "episodes": episodes})
+
+
+def _stop(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
+    """Episodes in task order (None: not run); progress on stderr. SIGINT or SIGTERM stops the
+    run and keeps the finished episodes (handlers set here: a shell starts background jobs
+    with SIGINT ignored)."""
+    out: list[dict | None] = [None] * len(tasks)
+
+    def done(k: int, record: dict) -> None:
+        out[k] = record
+        finished = sum(r is not None for r in out)
+        t = tasks[k]
+        print(
+            f"[{finished}/{len(tasks)}] {t.problem} {t.prior_source} {t.mode} {t.strategy} "
+            f"#{t.instance} ({'feasible' if t.feasible else 'infeasible'}): "
+            f"{record['outcome']} in {record['cycles']} cycles",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        if workers == 1:
+            for k, task in enumerate(tasks):
+                done(k, _episode(task))
+        else:
+            with multiprocessing.get_context("fork").Pool(workers) as pool:
+                for k, record in pool.imap_unordered(_indexed, enumerate(tasks)):
+                    done(k, record)
+    except KeyboardInterrupt:
+        print("interrupted: reporting the finished episodes", file=sys.stderr, flush=True)
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    return out
+
+
+def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
+    return item[0], _episode(item[1])
+
+
+def run(args) -> dict:
+    instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
+    config = PerceptionConfig.load(args.perception_config) if "depth" in args.prior else None
+    truths = {name: _truths(args, name, instances, config) for name in args.problems}
+    keys = [
+        (name, source, mode, strategy)
+        for name in args.problems
+        for source in args.prior
+        for mode in args.mode
+        for strategy in args.strategies
+    ]
+    # instance-major order: a run stopped early leaves every row with its first instances
+    tasks = [
+        _Task(
+            *key,
+            i,
+            truths[key[0]][i]["truth"],
+            _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
+            truths[key[0]][i]["feasible"][key[2]],
+            truths[key[0]][i]["seed"],
+            max_cycles,
+            args.samples,
+        )
+        for i in range(instances)
+        for key in keys
+    ]
+    records = _run_all(tasks, args.workers)
+    rows: dict[tuple, list[dict]] = {key: [] for key in keys}
+    for task, record in zip(tasks, records, strict=True):
+        if record is not None:
+            key = (task.problem, task.prior_source, task.mode, task.strategy)
+            rows[key].append({**record, "feasible": task.feasible})
+    results = [
+        {
+            "problem": name,
+            "prior": source,
+            "mode": mode,
+            "strategy": strategy,
+            **_summary(episodes),
+            "episodes": episodes,
+        }
+        for (name, source, mode, strategy), episodes in rows.items()
+        if episodes
+    ]
+    _ratios(results)
+    print(HEADER)
+    for row in results:
+        print(_line(row))
     return {
         "instances": instances,
         "max_cycles": max_cycles,
         "samples": args.samples,
-        "note": "wall times from a shared 2-core machine",
+        "workers": args.workers,
+        "unfinished_episodes": sum(r is None for r in records),
+        "perception_config": str(args.perception_config),
+        "note": "wall times per process, from a shared 2-core machine "
+        f"running {args.workers} episode process(es)",
+        "truths": {name: [_truth_record(t) for t in entries] for name, entries in truths.items()},
         "results": results,
     }

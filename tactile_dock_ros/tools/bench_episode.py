@@ -1,25 +1,55 @@
-"""Docking episodes on the mock profile over DDS: wall time and per-cycle latency per stage.
+"""Docking episodes on the mock profile over DDS: outcomes and per-cycle latency per stage.
 
-Each repetition brings up the five nodes of the mock launch file as processes (a fresh DDS
-domain), runs one episode on ``--problem`` with ground-truth seed ``seed + r`` and records the
-outcome, the cycles, the episode wall time and the perception / inference / planning /
-execution latencies. Medians over repetitions; the machine may be shared, say so with the numbers.
+Each episode brings up the five nodes of the mock launch file as processes (a fresh DDS
+domain) and runs one episode on a problem's ground truth of seed ``seed + k`` (k < ``--seeds``)
+for every problem of ``--problems``. Recorded: the final state and why (a GIVE_UP decision of
+the planner, the planner's cycle budget, or something else), the cycles, whether the truth is
+feasible (``simulate.feasible``, with ideal compliance and without: the mock profile plans
+non-compliant, config/mock.yaml), the episode wall time and the perception / inference /
+planning / execution latencies. Per problem: counts and medians over its episodes. The machine
+may be shared: say so with the latencies. ``--repeats`` is not used (the seeds are the episodes).
 """
 
 from __future__ import annotations
 
+import argparse
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from tactile_dock_ros.core import problems, simulate
 from tactile_dock_ros.tools import bringup
+
+STAGES = ("wall_s", "perception_s", "inference_s", "planning_s", "execution_s")
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--problem", default="sloper", help="benchmark problem of the terrain")
+    parser.add_argument("--problems", nargs="+", default=problems.names(), choices=problems.names())
+    parser.add_argument("--seeds", type=_positive, default=5, help="truth seeds per problem")
     parser.add_argument("--prior-source", default="depth", choices=("depth", "problem"))
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per episode")
+
+
+def ended_by(record) -> str:
+    """'docked', 'planner' (its GIVE_UP decision), 'budget' (``max_cycles`` spent), 'no_shape'
+    (inference found none) or the final state in lower case (aborted, none)."""
+    message = record.status.message if record.status is not None else ""
+    if record.state == "DOCKED":
+        return "docked"
+    if record.state != "GAVE_UP":
+        return record.state.lower()
+    if "cycle budget" in message:
+        return "budget"
+    return "no_shape" if "no shape consistent" in message else "planner"
 
 
 def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
@@ -48,10 +78,18 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
     def stage(key):
         return [c[key] for c in cycles if c[key] is not None]
 
+    spec = problems.get(problem)
+    truth = spec.sample_ground_truth(np.random.default_rng(seed))  # as mock_hardware draws it
     return {
+        "problem": problem,
         "seed": seed,
+        "feasible": bool(simulate.feasible(spec, truth)),
+        "feasible_non_compliant": bool(simulate.feasible(spec, truth, compliant=False)),
         "state": record.state,
+        "ended_by": ended_by(record),
+        "message": record.status.message if record.status is not None else "",
         "cycles": len(cycles),
+        "p_dock": [c["p_dock"] for c in cycles],
         "wall_s": record.wall_seconds,
         "perception_s": record.perception_seconds,
         "inference_s": stage("inference_s"),
@@ -60,32 +98,60 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
     }
 
 
-def run(args) -> dict:
-    episodes = []
-    for r in range(args.repeats):
-        bringup.isolate_dds()
-        result = _one(args.problem, args.seed + r, args.prior_source, args.timeout)
-        print(
-            f"seed {result['seed']}: {result['state']} in {result['cycles']} cycles, "
-            f"{result['wall_s']:.2f} s"
-        )
-        episodes.append(result)
+def summary(episodes: list[dict]) -> dict:
+    """Counts and medians over one problem's episodes."""
+    infeasible = [e for e in episodes if not e["feasible"]]
 
     def median(key):
         values = [v for e in episodes for v in (e[key] if isinstance(e[key], list) else [e[key]])]
         values = [v for v in values if v is not None]
         return float(np.median(values)) if values else None
 
-    summary = {
-        key: median(key)
-        for key in ("wall_s", "perception_s", "inference_s", "planning_s", "execution_s")
+    planner = [e["cycles"] for e in infeasible if e["ended_by"] == "planner"]
+    return {
+        "episodes": len(episodes),
+        "feasible": sum(e["feasible"] for e in episodes),
+        "docked_on_feasible": sum(e["feasible"] and e["state"] == "DOCKED" for e in episodes),
+        "infeasible_planner_give_up": len(planner),
+        "infeasible_planner_give_up_cycles_median": float(np.median(planner)) if planner else None,
+        "infeasible_budget": sum(e["ended_by"] == "budget" for e in infeasible),
+        "other": sum(e["ended_by"] not in ("docked", "planner", "budget") for e in episodes),
+        "cycles_median": float(np.median([e["cycles"] for e in episodes])),
+        **{key: median(key) for key in STAGES},
     }
-    summary["docked"] = sum(e["state"] == "DOCKED" for e in episodes)
-    summary["cycles_median"] = float(np.median([e["cycles"] for e in episodes]))
-    print(f"{'median':<16} {'seconds':>9}")
-    for key in ("wall_s", "perception_s", "inference_s", "planning_s", "execution_s"):
-        value = summary[key]
-        print(f"{key:<16} {'-' if value is None else f'{value:9.3f}':>9}")
-    print(f"docked {summary['docked']}/{len(episodes)}, median cycles {summary['cycles_median']}")
-    return {"problem": args.problem, "prior_source": args.prior_source, "episodes": episodes,
-            "summary": summary}  # fmt: skip
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def run(args) -> dict:
+    episodes = []
+    for name in args.problems:
+        for seed in range(args.seed, args.seed + args.seeds):
+            bringup.isolate_dds()
+            e = _one(name, seed, args.prior_source, args.timeout)
+            print(
+                f"{name} seed {seed} ({'feasible' if e['feasible'] else 'infeasible'}): "
+                f"{e['state']} ({e['ended_by']}) in {e['cycles']} cycles, {e['wall_s']:.2f} s",
+                flush=True,
+            )
+            print(f"{name} seed {seed}: {e['state']} ({e['ended_by']})", file=sys.stderr)
+            episodes.append(e)
+    summaries = {}
+    print(
+        f"{'problem':13} {'docked/feas':>11} {'inf: planner':>12} {'budget':>6} {'other':>5} "
+        f"{'cycles':>6} {'wall s':>7} {'percep s':>8} {'infer s':>7} {'plan s':>6} {'exec s':>6}"
+    )
+    for name in args.problems:
+        s = summaries[name] = summary([e for e in episodes if e["problem"] == name])
+        print(
+            f"{name:13} {s['docked_on_feasible']:>5}/{s['feasible']:<5} "
+            f"{s['infeasible_planner_give_up']:>5}/{s['episodes'] - s['feasible']:<6} "
+            f"{s['infeasible_budget']:>6} {s['other']:>5} {s['cycles_median']:>6.1f} "
+            f"{_fmt(s['wall_s'], '.2f'):>7} {_fmt(s['perception_s'], '.3f'):>8} "
+            f"{_fmt(s['inference_s'], '.3f'):>7} {_fmt(s['planning_s'], '.3f'):>6} "
+            f"{_fmt(s['execution_s'], '.2f'):>6}"
+        )
+    return {"prior_source": args.prior_source, "seeds": args.seeds, "summary": summaries,
+            "episodes": episodes}  # fmt: skip

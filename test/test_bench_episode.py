@@ -1,0 +1,55 @@
+"""bench episode's bookkeeping: how an episode ended, per-problem counts, bad arguments."""
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from tactile_dock_ros.tools import bench, bench_episode
+from tactile_dock_ros.tools.episode import EpisodeRecord
+
+
+def _record(message: str) -> EpisodeRecord:
+    return EpisodeRecord(status=DiagnosticStatus(message=message))
+
+
+@pytest.mark.parametrize(
+    ("message", "expected"),
+    [
+        ("DOCKED: docked", "docked"),
+        ("GAVE_UP: best docking probability 2.00e-04 < threshold 0.001", "planner"),
+        ("GAVE_UP: cycle budget of 8 spent", "budget"),
+        ("GAVE_UP: inference found no shape consistent with the contact history", "no_shape"),
+        ("ABORTED: sensor timeout", "aborted"),
+    ],
+)
+def test_ended_by(message, expected):
+    assert bench_episode.ended_by(_record(message)) == expected
+    assert bench_episode.ended_by(EpisodeRecord()) == "none"
+
+
+def _episode(feasible, ended_by, cycles):
+    state = {"docked": "DOCKED", "aborted": "ABORTED"}.get(ended_by, "GAVE_UP")
+    stages = {k: [1.0] for k in ("inference_s", "planning_s", "execution_s")}
+    return {"feasible": feasible, "ended_by": ended_by, "state": state, "cycles": cycles,
+            "wall_s": 10.0, "perception_s": 0.01, **stages}  # fmt: skip
+
+
+def test_summary_separates_planner_give_ups_from_the_budget():
+    episodes = [
+        _episode(True, "docked", 1),
+        _episode(True, "aborted", 1),
+        _episode(False, "planner", 3),
+        _episode(False, "planner", 5),
+        _episode(False, "budget", 8),
+    ]
+    s = bench_episode.summary(episodes)
+    assert (s["episodes"], s["feasible"], s["docked_on_feasible"]) == (5, 2, 1)
+    assert s["infeasible_planner_give_up"] == 2 and s["infeasible_budget"] == 1
+    assert s["infeasible_planner_give_up_cycles_median"] == 4.0
+    assert s["other"] == 1 and s["cycles_median"] == 3.0
+
+
+@pytest.mark.parametrize("bad", [["--seeds", "0"], ["--problems", "boulder"]])
+def test_bad_arguments_are_rejected(bad):
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(["episode", *bad])
+    assert exit_info.value.code == 2
