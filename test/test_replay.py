@@ -180,7 +180,11 @@ def test_a_bag_stores_each_topics_qos_and_reads_with_the_mcap_packages(recorded)
 
 def test_the_replay_reads_an_sqlite3_bag_as_the_mcap_one(recorded, tmp_path):
     bag.write(tmp_path / "db3", bag.read(recorded), storage="sqlite3")
-    assert list(bag.read(tmp_path / "db3")) == list(bag.read(recorded))
+
+    def fields(path) -> list:  # repr: a GIVE_UP plan's NaN target is not == itself
+        return [(topic, t, repr(msg)) for topic, t, msg in bag.read(path)]
+
+    assert fields(tmp_path / "db3") == fields(recorded)
     cycles = replay.load_cycles(tmp_path / "db3")
     assert [c.recorded.plan_id for c in cycles] == [1, 2, 3] * 2
     assert all(replay.compare(c, replay.replan(c, DEFAULTS))["same"] for c in cycles)
