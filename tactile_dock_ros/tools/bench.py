@@ -27,8 +27,8 @@ from pathlib import Path
 
 SUITES = {
     # suite name -> one-line description
-    "docking": "Fig. 13: ours vs growing window vs info gain, cycles and success per problem",
-    "episode": "docking episodes on the mock profile over DDS: wall time, per-cycle latency",
+    "docking": "Fig. 13: ours vs GW vs IG per problem, on the problem and the depth-camera prior",
+    "episode": "mock-profile episodes over DDS per problem: outcomes (give-up vs budget), latency",
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "prior": "depth prior calibration: 2-sigma coverage, NLL, energy score, old vs new model",
