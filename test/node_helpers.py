@@ -1,8 +1,6 @@
 """Build a node of the suite in-process, in its own rclpy context, from launch-file settings."""
 
 import contextlib
-import importlib
-import inspect
 from collections.abc import Iterator
 
 import rclpy
@@ -10,6 +8,7 @@ from conftest import REPO_ROOT
 from rclpy.context import Context
 from rclpy.node import Node
 
+from tactile_dock_ros.nodes.common import node_class
 from tactile_dock_ros.tools import launch_xml
 
 LAUNCH_FILE = REPO_ROOT / "launch" / "tactile_dock.launch.xml"
@@ -22,17 +21,6 @@ def launch_nodes(profile: str, **arguments: str) -> dict:
     arguments = {"profile": profile, "state_directory": "", **arguments}
     nodes = launch_xml.parse(LAUNCH_FILE, SHARE, arguments)
     return {n.name: n for n in nodes}
-
-
-def node_class(executable: str) -> type[Node]:
-    """The one Node subclass defined by ``tactile_dock_ros.nodes.<executable>``."""
-    module = importlib.import_module(f"tactile_dock_ros.nodes.{executable}")
-    (cls,) = [
-        c
-        for _, c in inspect.getmembers(module, inspect.isclass)
-        if issubclass(c, Node) and c.__module__ == module.__name__
-    ]
-    return cls
 
 
 @contextlib.contextmanager

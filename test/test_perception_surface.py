@@ -83,9 +83,9 @@ def test_bin_medians_are_taken_at_the_mean_bearing():
     assert point_segment_distances(plain, wall).max() > 5e-4
 
 
-def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
-    truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(2))
-    depth = render_depth(
+def _render(truth: np.ndarray) -> np.ndarray:
+    """The mock camera's depth image (m) of a truth, calibrated camera, seeded noise."""
+    return render_depth(
         truth,
         K,
         CONFIG.extrinsic.T_plane_camera,
@@ -93,6 +93,11 @@ def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
         np.random.default_rng(0),
         CONFIG.depth_noise,
     )
+
+
+def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
+    truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(2))
+    depth = _render(truth)
     priors = {
         model: perceive(depth, K, _with_model(model), np.random.default_rng(1)).prior
         for model in ("independent", "correlated")
@@ -174,14 +179,7 @@ def test_default_is_correlated_and_scenes_still_perceive():
 
 def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
     truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(1))
-    depth = render_depth(
-        truth,
-        K,
-        CONFIG.extrinsic.T_plane_camera,
-        bench_prior.IMAGE,
-        np.random.default_rng(0),
-        CONFIG.depth_noise,
-    )
+    depth = _render(truth)
     plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
     occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.1)
     tailed = perceive(

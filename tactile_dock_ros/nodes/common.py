@@ -3,6 +3,8 @@ main."""
 
 from __future__ import annotations
 
+import importlib
+import inspect
 import sys
 import time
 from collections import Counter
@@ -104,6 +106,18 @@ def subscribe(
     )
     name = subscription.topic_name
     return subscription
+
+
+def node_class(executable: str) -> type[Node]:
+    """The one Node subclass defined by ``tactile_dock_ros.nodes.<executable>`` (in-process
+    runs of a launch file's node: tests, the fuzzer)."""
+    module = importlib.import_module(f"tactile_dock_ros.nodes.{executable}")
+    (cls,) = [
+        c
+        for _, c in inspect.getmembers(module, inspect.isclass)
+        if issubclass(c, Node) and c.__module__ == module.__name__
+    ]
+    return cls
 
 
 class Stopwatch:

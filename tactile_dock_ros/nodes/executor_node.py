@@ -224,16 +224,15 @@ class ExecutorNode(Node):
             self.report(plan, Outcome.ABORTED, f"stopped before starting: {why}")
 
     def start_pending(self) -> None:
-        """Start the received plan once its episode runs (``EpisodeGate``: up to connect_timeout
-        for its status) and pose and wrench flow: fresh (within sensor_timeout) if they ever
-        arrived, else waiting up to connect_timeout for the first ones (discovery)."""
+        """Start the received plan while its episode runs (``EpisodeGate``: refused once it
+        ended or was superseded) and pose and wrench flow: fresh (within sensor_timeout) if they
+        ever arrived, else waiting up to connect_timeout for the first ones (discovery)."""
         plan, received = self.pending
         now = now_seconds(self)
         admission, why = self.gate.admit(plan.episode)
         if admission is not Admission.RUN:
-            if admission is Admission.REFUSE or now - received > self.p.connect_timeout:
-                self.pending = None
-                self.report(plan, Outcome.ABORTED, f"refused: {why}")
+            self.pending = None
+            self.report(plan, Outcome.ABORTED, f"refused: {why}")
             return
         stamps = [w.last for w in self.health.streams.values()]
         if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):

@@ -63,7 +63,8 @@ class EpisodeGate:
     every plan runs. After that a plan runs only while its episode is the current one and
     RUNNING; a plan of an episode seen earlier, or of the current one once it ended, is
     refused; a plan of an unknown episode waits for its status (DDS does not order the plan
-    and status topics), and the caller refuses it after a timeout.
+    and status topics): the executor drops that copy unseen, and the planner's next copy
+    (resent every 0.5 s) runs once the RUNNING status came.
     """
 
     def __init__(self) -> None:

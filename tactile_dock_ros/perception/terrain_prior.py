@@ -109,21 +109,7 @@ def add_tails(
     for end, side in ((0, -1.0), (n - 1, 1.0)):  # the solid is left of the walking direction
         ray = verts[end] - camera_xy
         far = verts[end] + occlusion.tail_m * ray / max(np.linalg.norm(ray), 1e-12)
-        tails.append(
-            occlusion_columns(
-                verts[end],
-                far,
-                k,
-                occlusion.bridge_sigma_m_per_sqrt_m,
-                occlusion.columns,
-                occlusion.samples,
-                occlusion.trajectories,
-                rng,
-                sampler,
-                free_end=True,
-                side=side,
-            )
-        )
+        tails.append(_bridge(verts[end], far, k, occlusion, rng, sampler, free_end=True, side=side))
     (first, first_cols), (last, last_cols) = tails
     r1, r2 = first_cols.shape[1], last_cols.shape[1]
     out = np.zeros((n + 2 * k, 2, m + r1 + r2))
@@ -133,6 +119,22 @@ def add_tails(
     out[:k, :, m : m + r1] = first_cols.reshape(k, 2, r1)[::-1]  # walking order: far to near
     out[k + n :, :, m + r1 :] = last_cols.reshape(k, 2, r2)
     return np.vstack([first[::-1], verts, last]), out.reshape(2 * (n + 2 * k), -1)
+
+
+def _bridge(a, b, k: int, occlusion: OcclusionParams, rng, sampler: Sampler, **kwargs):
+    """``occlusion_columns`` with the configured bridge diffusion and sample counts."""
+    return occlusion_columns(
+        a,
+        b,
+        k,
+        occlusion.bridge_sigma_m_per_sqrt_m,
+        occlusion.columns,
+        occlusion.samples,
+        occlusion.trajectories,
+        rng,
+        sampler,
+        **kwargs,
+    )
 
 
 def build_prior(
@@ -157,17 +159,7 @@ def build_prior(
     blocks = []
     for first, last in terrain.stretches:
         k = last - first - 1
-        mean, basis = occlusion_columns(
-            verts[first],
-            verts[last],
-            k,
-            occlusion.bridge_sigma_m_per_sqrt_m,
-            occlusion.columns,
-            occlusion.samples,
-            occlusion.trajectories,
-            rng,
-            sampler,
-        )
+        mean, basis = _bridge(verts[first], verts[last], k, occlusion, rng, sampler)
         verts[first + 1 : last] = mean
         block = np.zeros((2 * n, basis.shape[1]))
         block[2 * (first + 1) : 2 * last] = basis

@@ -21,7 +21,6 @@ Two seeded, bounded runs over the same mutations (``tools.fuzz_messages``):
 from __future__ import annotations
 
 import importlib
-import inspect
 import re
 import tempfile
 import time
@@ -44,6 +43,7 @@ from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.msg import ContactHistory, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes.common import node_class
 from tactile_dock_ros.tools import bringup, fuzz_messages
 from tactile_dock_ros.tools.fuzz_messages import FuzzContext
 
@@ -141,16 +141,6 @@ def _context(now_s: int) -> FuzzContext:
 # --------------------------------------------------------------------------- in-process
 
 
-def _node_class(executable: str) -> type[Node]:
-    module = importlib.import_module(f"tactile_dock_ros.nodes.{executable}")
-    (cls,) = [
-        c
-        for _, c in inspect.getmembers(module, inspect.isclass)
-        if issubclass(c, Node) and c.__module__ == module.__name__
-    ]
-    return cls
-
-
 def in_process(messages: int, seed: int, params_dir: Path) -> dict:
     """Every subscription of every node, called directly with ``messages`` mutations each."""
     rows = {}
@@ -158,7 +148,7 @@ def in_process(messages: int, seed: int, params_dir: Path) -> dict:
         argv = spec.command(bringup.PACKAGE_ROOT / "scripts", params_dir)
         context = Context()
         rclpy.init(context=context)
-        node = _node_class(spec.executable)(
+        node = node_class(spec.executable)(
             context=context, cli_args=argv[argv.index("--ros-args") :]
         )
         try:
