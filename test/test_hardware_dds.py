@@ -44,7 +44,8 @@ def test_executor_docks_on_the_mock_floor_and_respects_its_limits(floor_bringup)
     reports, speeds = [], []
     with ros_node("test_planner") as (node, executor):
         plan_pub = node.create_publisher(DockingPlan, "plan", qos.EVENTS)
-        node.create_subscription(ExecutionReport, "execution_report", reports.append, qos.EVENTS)
+        # Latched reports: one published before this reader matched still arrives.
+        node.create_subscription(ExecutionReport, "execution_report", reports.append, qos.REPORTS)
         node.create_subscription(
             TwistStamped,
             "/arm/cmd_twist",
@@ -63,14 +64,14 @@ def test_executor_docks_on_the_mock_floor_and_respects_its_limits(floor_bringup)
             timeout_s=30.0,
         )
         assert matched, [p.poll() for p in processes.values()]
-        plan_pub.publish(_plan(1, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]], speed=0.9))  # too fast
-        assert spin_until(executor, lambda: len(reports) == 1, timeout_s=20.0)
-        plan = _plan(2, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]])
-        # The planner resends the plan being run; the executor stops a plan it stops hearing.
-        resend = node.create_timer(1.0, lambda: plan_pub.publish(plan))
-        plan_pub.publish(plan)
-        assert spin_until(executor, lambda: len(reports) == 2, timeout_s=30.0)
-        node.destroy_timer(resend)
+        # Like the planner, resend each plan until its report comes: the executor ignores
+        # copies it has seen, and a copy sent before its reader matched the writer is lost.
+        for plan, speed in ((1, 0.9), (2, 0.2)):  # plan 1 is too fast
+            message = _plan(plan, [[0.0, 0.3], [0.0, 0.1], [0.0, -0.1]], speed=speed)
+            resend = node.create_timer(0.5, lambda m=message: plan_pub.publish(m))
+            plan_pub.publish(message)
+            assert spin_until(executor, lambda n=plan: len(reports) == n, timeout_s=30.0)
+            node.destroy_timer(resend)
     refused, docked = (convert.report_from_msg(r) for r in reports)
     assert refused.outcome == ExecutionReport.ABORTED and "speed" in refused.detail
     assert len(refused.history) == 0
