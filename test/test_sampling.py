@@ -338,9 +338,9 @@ def test_problem2_means_match_rejection_over_40_seeds(
     _check_seeds(problem2_reference, method, range(40), descent_only, monkeypatch, n)
 
 
-def _pocket_state(problem, history, mean, std):
-    """A feasible state far (> 5 posterior std) from the posterior mean: descents from prior
-    draws land in such pockets ~9 % of the time on problem 2."""
+def _descent_seeds(problem, history, mean, std):
+    """Feasible descent states from 64 prior draws and their largest standardized distance
+    from the posterior mean."""
     shape = problem.prior
     system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
     rng = np.random.default_rng(0)
@@ -348,9 +348,24 @@ def _pocket_state(problem, history, mean, std):
     z, count = sampling.random_descent(system, z0, rng, 60)
     ok = (count == 0) & history_consistent(False, shape.vertices(z), history, shape.friction)
     dev = np.max(np.abs(shape.vertices(z).reshape(len(z), -1) - mean) / std, axis=1)
-    far = np.flatnonzero(ok & (dev > 5))
-    assert far.size
-    return z[far[0]]
+    return z[ok], dev[ok]
+
+
+def _pocket_state(problem, history, mean, std):
+    """A feasible state far (> 5 posterior std) from the posterior mean: descents scanning
+    +- 9 std per step (the sampler's before issue 12's fix) land in such pockets 9 of 64 times
+    on problem 2."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sampling, "DESCENT_HALF_WIDTH", 9.0)
+        z, dev = _descent_seeds(problem, history, mean, std)
+    assert np.any(dev > 5)
+    return z[np.argmax(dev > 5)]
+
+
+def test_descent_seeds_stay_near_the_posterior(problem2_reference):
+    """Descent steps scan +- DESCENT_HALF_WIDTH std: no seed lands in a far pocket."""
+    z, dev = _descent_seeds(*problem2_reference)
+    assert len(z) >= 32 and dev.max() < 5, dev.max()
 
 
 def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch, caplog):
