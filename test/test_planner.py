@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from tactile_dock_ros.core import planner, problems, probsim, simulate
 from tactile_dock_ros.core.freespace import FreeSpace, likely_obstacle_region
+from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
 
 
@@ -76,6 +77,24 @@ def test_shortest_path_avoids_obstacles_and_is_no_longer_than_detour():
     assert not shapely.intersects(shapely.LineString(path), shapely.box(-0.99, -0.99, 0.99, 0.99))
     length = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
     assert length <= np.hypot(1.0, 1.0) + 2 + np.hypot(0.05, 1.0) + 0.02  # over the top
+
+
+def test_a_tool_on_the_outline_leaves_the_way_it_came():
+    """On the mean outline ``ascend`` has no direction; ``retrace`` walks the tool's own free
+    moves back out of the likely-obstacle region."""
+    block = shapely.box(-1.0, -1.0, 1.0, 1.0)
+    start = np.array([0.0, 1.0])  # on the mean outline's top edge
+    space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, start)
+    assert space.ascend(start, 0.05) is None
+    history = History(
+        [[3.0, 3.0], [0.0, 2.0], [0.0, 1.5], [0.0, 1.0]],
+        [[3.0, 2.5], [0.0, 1.5], [0.0, 1.0], [0.0, 0.95]],
+        [Status.FREE, Status.FREE, Status.FREE, Status.COLLIDE],
+    )
+    path = planner.retrace(history, start, space, 0.05)
+    np.testing.assert_allclose(path, [[0.0, 1.0], [0.0, 1.5]])
+    assert planner.retrace(None, start, space, 0.05) is None
+    assert planner.retrace(history.subset(np.array([0, 3])), start, space, 0.05) is None
 
 
 @pytest.mark.parametrize("name", problems.names())

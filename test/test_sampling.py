@@ -1,5 +1,8 @@
 """Samplers: feasibility of every sample, distribution correctness, fallbacks, ESS."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -15,6 +18,9 @@ from tactile_dock_ros.core.sampling_problems import (
     probe_history,
     three_ledges_after_probes,
 )
+from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.perception.mock_camera import depth_prior
+from tactile_dock_ros.tools import bringup
 
 
 @pytest.fixture(scope="module")
@@ -439,3 +445,20 @@ def test_atypical_descent_seeds_are_screened():
     seeds = sampling._seed(problem.prior, history, np.random.default_rng(4), 16, 1e-4, 8, 60)
     assert seeds.screened > 0 and seeds.distinct >= sampling.SEED_MIN_DISTINCT
     assert np.all(sampling._typical(seeds.z, seeds.z))
+
+
+def test_an_inconsistent_history_is_pruned_until_it_fits():
+    """The history that ended a depth-prior episode (sloper truth 2, bench docking seeds) with
+    "no history-consistent seed found": it needs more than three rounds of dropping."""
+    problem, index = problems.get("sloper"), problems.names().index("sloper")
+    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 2]))
+    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
+    prior = depth_prior(truth, config, np.random.default_rng([0, index, 2, 2])).prior
+    data = np.load(Path(__file__).parent / "data/sloper2_depth_history.npz")
+    history = History(data["a"], data["b"], data["status"])
+    rng = np.random.default_rng()
+    rng.bit_generator.state = json.loads(str(data["rng_state"]))  # the episode's, at that cycle
+    out = sample_posterior(prior, history, 100, rng, "hmc", init_z=data["init_z"])
+    kept = history.subset(np.setdiff1d(np.arange(len(history)), out.dropped))
+    assert len(out.z) == 100 and 0 < len(out.dropped) < len(history)
+    assert history_consistent(False, out.vertices, kept, prior.friction).all()

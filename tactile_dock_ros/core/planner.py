@@ -38,6 +38,7 @@ import numpy as np
 
 from . import probsim, simulate, slides
 from .freespace import FreeSpace, likely_obstacle_region
+from .history import Status
 from .shape import GaussianShape
 
 OBJECTIVES = ("ours", "greedy", "window", "info_gain")
@@ -83,6 +84,39 @@ class Plan:
     target_point: np.ndarray  # (2,) aimed-at expected edge midpoint (NaN on give-up)
     candidates: Candidates | None = None
     rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
+
+
+def retrace(history, start: np.ndarray, space: FreeSpace, step: float) -> np.ndarray | None:
+    """Path (L, 2) from ``start`` back along the tool's own free moves to a point outside the
+    likely-obstacle region, or None.
+
+    Decision: after a contact the tool rests at the end of its last free segment, which the
+    posterior's margin often covers; when ``FreeSpace.ascend`` finds no way out (the tool sits
+    on the mean outline), the tool leaves the way it came: free observations are recorded in
+    move order and each starts where the previous one ended, so walking them backwards from
+    the one ending at ``start`` retraces space the tool has crossed (no sample consistent with
+    the history intersects it). Not a hot path: one walk over the history per plan.
+    """
+    if history is None:
+        return None
+    free = np.flatnonzero(np.asarray(history.status) == Status.FREE)
+    path = [np.asarray(start, float)]
+    for k in free[::-1]:
+        if np.linalg.norm(history.b[k] - path[-1]) > 0.5 * step:
+            continue
+        path.append(np.asarray(history.a[k], float))
+        if not space.blocked(path[-1])[0]:
+            return np.array(path)
+    return None
+
+
+def _lead(space: FreeSpace, start: np.ndarray, history, step: float) -> np.ndarray | None:
+    """The path's first part: ``start`` alone in free space, else a way out of the
+    likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None."""
+    if not space.blocked(start)[0]:
+        return np.array([start])
+    lead = space.ascend(start, step)
+    return retrace(history, start, space, step) if lead is None else lead
 
 
 def exploration_bonus(aim: np.ndarray, previous: np.ndarray, width: float) -> np.ndarray:
@@ -346,13 +380,9 @@ def plan(
             f"best docking probability {best:.2e} < threshold {give_up_threshold:g}",
             candidates,
         )
-    lead = np.array([start])
-    if space.blocked(start)[0]:
-        lead = space.ascend(start, step)
-        if lead is None:
-            return _give_up(
-                rejected, "the tool is inside the likely-obstacle region with no way out"
-            )
+    lead = _lead(space, start, history, step)
+    if lead is None:
+        return _give_up(rejected, "the tool is inside the likely-obstacle region with no way out")
     values = score(candidates, objective, previous_targets, contact_resolution, give_up_threshold)
     order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
     for j in order[:max_path_attempts]:
@@ -367,7 +397,7 @@ def plan(
             continue
         path = np.vstack([lead[:-1], middle, tail[1:], candidates.end[j]])
         path = path[np.r_[True, np.any(np.diff(path, axis=0) != 0, axis=1)]]
-        if space.touches_outline(path[:-1]):
+        if space.touches_outline(path[len(lead) - 1 : -1]):  # the lead is known or made free
             continue
         # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
         whole = probsim.dock_probability(posterior, path, load, compliant)

@@ -790,7 +790,9 @@ def sample_posterior(
     checked (``convergence``, logged as a warning when the chains disagree). If
     ``seed_restarts`` descents all fail, the history is taken as inconsistent (sensor error):
     the observations violated by the best state found are dropped (``dropped``) and sampling
-    continues without them. Every returned sample satisfies every kept observation under the
+    continues without them, round after round until the rest is consistent (each round drops
+    at least one row; a depth prior with an open slice end needed more than three on sloper
+    truth 2). Every returned sample satisfies every kept observation under the
     exact geometric test. An empty history returns exact prior draws. ``max_steps`` (default
     50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
     verification keeps failing.
@@ -835,7 +837,7 @@ def sample_posterior(
     if shape.n_basis == 0:
         raise ValueError("MCMC needs at least one basis column; use method='rejection'")
 
-    for _ in range(3):  # bounded: each round drops at least one observation
+    for _ in range(len(history) + 1):  # each round drops >= 1 row: then at most the prior
         sub = history.subset(kept_idx)
         if len(sub) == 0:
             info["dropped_all"] = True
