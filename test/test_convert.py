@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from std_msgs.msg import Header
 from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
 
+from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.nodes import convert, validate
@@ -75,18 +76,22 @@ def test_malformed_shape_is_rejected(field, value, match):
 
 def test_history_round_trip_keeps_order_status_and_plan_ids():
     history = _history()
-    msg = convert.history_to_msg(history, HEADER, plan_ids=[1, 1, 2])
+    state = EpisodeState(history, [1, 1, 2], tool=[0.0, 0.4]).sampled(dropped=[0])
+    msg = convert.history_to_msg(state, HEADER)
     assert [s.plan_id for s in msg.segments] == [1, 1, 2]
-    assert convert.plan_ids_from_segments(msg.segments).tolist() == [1, 1, 2]
-    back = convert.history_from_segments(msg.segments)
-    np.testing.assert_array_equal(back.a, history.a)
-    np.testing.assert_array_equal(back.b, history.b)
-    np.testing.assert_array_equal(back.status, history.status)
+    back = convert.history_from_msg(msg)
+    assert back.move_ids.tolist() == [1, 1, 2] and back.tool is None
+    np.testing.assert_array_equal(back.history.a, history.a)
+    np.testing.assert_array_equal(back.history.b, history.b)
+    np.testing.assert_array_equal(back.history.status, history.status)
+    into = convert.history_from_msg(convert.history_to_msg(EpisodeState(), HEADER), state)
+    assert len(into.history) == 0 and into.dropped.tolist() == []  # its rows, none dropped
+    assert into.tool.tolist() == [0.0, 0.4]  # the rest of the state is kept
 
 
 def test_empty_history_converts_both_ways():
     assert len(convert.history_from_segments([])) == 0
-    assert convert.history_to_msg(History(), HEADER).segments == []
+    assert convert.history_to_msg(EpisodeState(), HEADER).segments == []
 
 
 @pytest.mark.parametrize(
@@ -98,7 +103,7 @@ def test_empty_history_converts_both_ways():
     ],
 )
 def test_malformed_segment_is_rejected(change, match):
-    segments = convert.history_to_msg(_history(), HEADER).segments
+    segments = convert.history_to_msg(EpisodeState(_history()), HEADER).segments
     change(segments[1])
     with pytest.raises(MessageError, match=match):
         convert.history_from_segments(segments)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate
+from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
 
 
@@ -73,6 +74,8 @@ def test_bad_arguments_raise():
         explore.run_episode(problem, truth, "random", np.random.default_rng(0))
     with pytest.raises(ValueError):
         explore.run_episode(problem, truth, "ours", np.random.default_rng(0), max_cycles=0)
+    with pytest.raises(ValueError, match="give_up_threshold"):  # a planner setting
+        explore.run_episode(problem, truth, "ours", np.random.default_rng(0), give_up_threshold=1)
 
 
 def test_contradictory_history_still_plans():
@@ -86,9 +89,8 @@ def test_contradictory_history_still_plans():
         [Status.FREE, Status.STICK],
     )
     post = sampling.sample_posterior(problem.prior, history, 40, np.random.default_rng(0))
-    plan = explore.planner.plan(
-        post.vertices, problem.prior, history, problem.start, problem.load, problem.friction
-    )
+    state = EpisodeState(history, tool=problem.start).sampled(post.z, post.dropped)
+    plan = explore.planner.plan(post.vertices, problem.prior, state, PlannerConfig(problem.load))
     assert plan.decision in ("dock", "give_up") and plan.reason
 
 

@@ -47,8 +47,8 @@ def test_a_restarted_node_restores_the_episode_history_from_its_journal(tmp_path
         assert spin_until(executor, lambda: node.episode == EPISODE, 10.0)
         for plan_id, rows in ((1, 2), (2, 3)):
             reports.publish(_report(plan_id, rows))
-        assert spin_until(executor, lambda: len(node.history) == 5, 10.0)
-        before = node.history, node.plan_ids.copy()
+        assert spin_until(executor, lambda: len(node.episode_state.history) == 5, 10.0)
+        before = node.episode_state
     # A new process: only the latched episode id arrives again (no report is redelivered).
     with node_with_driver(spec, tmp_path) as (node, driver, executor):
         histories = []
@@ -57,17 +57,17 @@ def test_a_restarted_node_restores_the_episode_history_from_its_journal(tmp_path
         episode.publish(UInt32(data=EPISODE))
         assert spin_until(executor, lambda: histories and len(histories[-1].segments) == 5, 10.0)
         restored = convert.history_from_segments(histories[-1].segments)
-        np.testing.assert_array_equal(restored.a, before[0].a)  # bit-exact through JSON
-        np.testing.assert_array_equal(restored.b, before[0].b)
-        np.testing.assert_array_equal(restored.status, before[0].status)
-        np.testing.assert_array_equal(node.plan_ids, before[1])
+        np.testing.assert_array_equal(restored.a, before.history.a)  # bit-exact through JSON
+        np.testing.assert_array_equal(restored.b, before.history.b)
+        np.testing.assert_array_equal(restored.status, before.history.status)
+        np.testing.assert_array_equal(node.episode_state.move_ids, [1, 1, 2, 2, 2])
         assert node.handled_plans == {1, 2}
         # A report already in the journal is a duplicate; another episode starts empty.
         _, reports = _inputs(driver)
         reports.publish(_report(2, 3))
-        assert not spin_until(executor, lambda: len(node.history) != 5, 1.0)
+        assert not spin_until(executor, lambda: len(node.episode_state.history) != 5, 1.0)
         episode.publish(UInt32(data=EPISODE + 1))
-        assert spin_until(executor, lambda: len(node.history) == 0, 10.0)
+        assert spin_until(executor, lambda: len(node.episode_state.history) == 0, 10.0)
 
 
 def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):

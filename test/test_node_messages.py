@@ -1,5 +1,7 @@
 """Malformed messages are logged and dropped without corrupting a node's state (in-process)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
@@ -163,12 +165,15 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
         other_episode.plan_id, other_episode.episode = 7, 5  # late, or from a restarted planner
         for report in (bad_status, empty, other_episode, msg):
             reports.publish(report)
-        assert spin_until(executor, lambda: len(node.history) == 1, 10.0)
-        assert node.handled_plans == {1}
+        assert spin_until(executor, lambda: len(node.episode_state.history) == 1, 10.0)
+        assert node.handled_plans == {1} and node.episode_state.move_ids.tolist() == [1]
 
 
 def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
     from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
+
+    from tactile_dock_ros.core.episode import EpisodeState
+    from tactile_dock_ros.core.history import History
 
     spec = launch_nodes("mock")["planner"]
     with node_with_driver(spec, tmp_path) as (node, driver, executor):
@@ -181,7 +186,7 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
         bad_samples = convert.samples_to_msg(good, convert.Header(), "hmc", 3.0, 0)
         bad_samples.num_samples = 4  # size mismatch
         segment = convert.history_to_msg(
-            convert.history_from_segments([]).extend([0.0, 0.5], [0.0, 0.2], [0]), convert.Header()
+            EpisodeState(History([0.0, 0.5], [0.0, 0.2], [0])), convert.Header()
         )
         segment.segments[0].status = 11  # unknown status
         empty_prior = ShapeDistribution(num_vertices=0)
@@ -194,7 +199,8 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
         samples.publish(samples_ok)
         assert spin_until(executor, lambda: node.samples is not None, 10.0)
         assert node.samples[0].method == "after"
-        assert node.history is None and node.prior is None and node.state == "IDLE"
+        assert len(node.episode_state.history) == 0  # the bad history was dropped
+        assert node.prior is None and node.state == "IDLE"
 
 
 def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_path):
@@ -234,7 +240,7 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
     from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
 
     from tactile_dock_ros.core import problems
-    from tactile_dock_ros.core.history import History
+    from tactile_dock_ros.core.episode import EpisodeState
 
     spec = launch_nodes("mock")["planner"]
     statuses, plans = [], []
@@ -260,7 +266,7 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
         future = start.call_async(Trigger.Request())
         assert spin_until(executor, future.done, 10.0) and future.result().success
         stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
-        history.publish(convert.history_to_msg(History(), stamp))
+        history.publish(convert.history_to_msg(EpisodeState(), stamp))
         pose.publish(_pose(0.0, 0.6, 0.45))
         empty = np.zeros((0, shape.n_vertices, 2))
         samples.publish(convert.samples_to_msg(empty, stamp, "hmc", 0.0, 0))
@@ -274,6 +280,7 @@ def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):
     from tactile_dock_ros.msg import ContactHistory
     from test_slides import LOAD, MU, level_edge, slide_probes, slope_shape
 
+    from tactile_dock_ros.core.episode import EpisodeState
     from tactile_dock_ros.core.shape import GaussianShape
 
     spec = launch_nodes("mock")["planner"]
@@ -282,11 +289,12 @@ def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):
         assert spin_until(executor, lambda: history.get_subscription_count() > 0, 10.0)
         slope = slope_shape()
         slide = slide_probes(slope, [3, 1])  # one slide: the plan id of both rows is 4
-        history.publish(convert.history_to_msg(slide, convert.Header(), plan_ids=[4, 4]))
-        assert spin_until(executor, lambda: node.history is not None, 10.0)
-        assert node.history_plan_ids.tolist() == [4, 4]
+        history.publish(convert.history_to_msg(EpisodeState(slide, [4, 4]), convert.Header()))
+        assert spin_until(executor, lambda: len(node.episode_state.history) == 2, 10.0)
+        assert node.episode_state.move_ids.tolist() == [4, 4]
         node.prior = GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), False, MU)
-        node.tool, node.load = np.array([0.05, 0.2]), LOAD
+        node.episode_state = node.episode_state.move([0.05, 0.2])
+        node.config = dataclasses.replace(node.config, load=LOAD)
         up = np.array([0.0, 1e-3])
         result = node.plan(np.stack([slope, slope + up, slope - up, level_edge(slope, 2)]))
         assert result.rejected == 1 and result.decision == "give_up", result.reason

@@ -50,6 +50,7 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("mock_hardware", "stiffness:=500", "stiffness"),  # an integer where a float is due
         ("perception", "capture:=sometimes", "capture"),
         ("inference", "method:=mh", "method: 'mh' is not one of"),  # a benchmark baseline only
+        ("planner", "load_direction:=[0.0, -2.0]", "load_direction must be a unit vector"),
     ],
 )
 def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path):
@@ -59,6 +60,23 @@ def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path)
         node_from_launch(spec, tmp_path, ["-p", f"{name}:{override}"]),
     ):
         pass
+
+
+@pytest.mark.parametrize("profile", ["mock", "robot"])
+def test_the_planner_plans_with_its_parameters(profile, tmp_path):
+    from tactile_dock_ros.core.episode import PlannerConfig
+
+    with node_from_launch(launch_nodes(profile)["planner"], tmp_path) as (node, _):
+        names = ("load_direction", "contact_resolution", "give_up_threshold", "compliant")
+        value = {name: node.get_parameter(name).value for name in names}
+        config = node.config
+    expected = PlannerConfig(
+        tuple(value["load_direction"]),
+        value["contact_resolution"],
+        value["give_up_threshold"],
+        compliant=value["compliant"],
+    )
+    assert config == expected
 
 
 def test_an_unknown_problem_stops_mock_hardware(tmp_path):

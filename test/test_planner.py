@@ -7,23 +7,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_dock_ros.core import planner, problems, probsim, simulate
+from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.freespace import FreeSpace, likely_obstacle_region
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
 
 
-def _prior_plan(name, seed=0, count=60, **kwargs):
+def _prior_plan(name, seed=0, count=60, start=None, targets=(), **settings):
     problem = problems.get(name)
     rng = np.random.default_rng(seed)
     samples = problem.prior.vertices(problem.prior.sample_z(rng, count))
-    args = dict(
-        start=problem.start,
-        load=problem.load,
-        friction=problem.friction,
-        contact_resolution=problem.contact_resolution,
-    )
-    args.update(kwargs)
-    return problem, samples, planner.plan(samples, problem.prior, None, **args)
+    state = EpisodeState(targets=targets, tool=problem.start if start is None else start)
+    config = PlannerConfig(problem.load, problem.contact_resolution, **settings)
+    return problem, samples, planner.plan(samples, problem.prior, state, config)
 
 
 @pytest.mark.parametrize("name", problems.names())
@@ -51,7 +47,7 @@ def test_plan_is_free_then_loads_through_target_edge(name):
 
 def test_objective_applies_exploration_bonus():
     _, _, first = _prior_plan("three_ledges")
-    _, _, again = _prior_plan("three_ledges", previous_targets=[first.target_point])
+    _, _, again = _prior_plan("three_ledges", targets=[first.target_point])
     assert again.target_point.tolist() != first.target_point.tolist()
     bonus = planner.exploration_bonus(first.candidates.aim, [first.target_point], 0.01)
     j = np.flatnonzero(first.candidates.edges == first.target_edge)[0]
@@ -93,7 +89,7 @@ def test_a_tool_on_the_outline_leaves_the_way_it_came():
     )
     path = planner.retrace(history, start, space, 0.05)
     np.testing.assert_allclose(path, [[0.0, 1.0], [0.0, 1.5]])
-    assert planner.retrace(None, start, space, 0.05) is None
+    assert planner.retrace(History(), start, space, 0.05) is None
     assert planner.retrace(history.subset(np.array([0, 3])), start, space, 0.05) is None
 
 
@@ -135,7 +131,7 @@ def test_no_edge_facing_the_load_gives_up():
     basis = np.tile([[0.0, 0.0], [0.0, 0.01]], (6, 1))[:, 1:]  # vertical offset, 1 cm
     shape = GaussianShape(mean, basis, closed=False, friction=0.5)
     samples = shape.vertices(shape.sample_z(np.random.default_rng(0), 20))
-    plan = planner.plan(samples, shape, None, np.array([0.0, 0.3]), np.array([0.0, 1.0]))
+    plan = planner.plan(samples, shape, EpisodeState(tool=[0.0, 0.3]), PlannerConfig((0.0, 1.0)))
     assert plan.decision == "give_up" and "faces" in plan.reason
     assert plan.path.shape == (0, 2) and plan.target_edge == -1
 
@@ -160,26 +156,14 @@ def test_low_threshold_gap_gives_up():
     assert plan.decision == "give_up" and "threshold" in plan.reason
 
 
-@pytest.mark.parametrize(
-    "kwargs",
-    [
-        dict(start=np.array([np.nan, 0.0])),
-        dict(load=np.zeros(2)),
-        dict(contact_resolution=0.0),
-        dict(give_up_threshold=1.5),
-        dict(objective="nonsense"),
-    ],
-)
-def test_bad_input_raises(kwargs):
-    with pytest.raises(ValueError):
-        _prior_plan("sloper", **kwargs)
-
-
-def test_bad_samples_raise():
+def test_bad_samples_or_an_unknown_tool_raise():
     problem = problems.get("sloper")
     samples = problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(0), 5))
+    state, config = EpisodeState(tool=problem.start), PlannerConfig(problem.load)
+    with pytest.raises(ValueError, match="tool position is unknown"):
+        planner.plan(samples, problem.prior, EpisodeState(), config)
     samples[2, 3, 0] = np.inf
-    with pytest.raises(ValueError):
-        planner.plan(samples, problem.prior, None, problem.start, problem.load)
-    with pytest.raises(ValueError):
-        planner.plan(samples[:1], problem.prior, None, problem.start, problem.load)
+    with pytest.raises(ValueError, match="finite"):
+        planner.plan(samples, problem.prior, state, config)
+    with pytest.raises(ValueError, match="N >= 2"):
+        planner.plan(samples[:1], problem.prior, state, config)

@@ -62,7 +62,7 @@ def test_a_restarted_planner_resumes_the_running_episode(tmp_path):
         assert statuses[-1].message == "RUNNING: resumed after a restart"
         assert {kv.key: kv.value for kv in statuses[-1].values}["cycles"] == "1"
         assert all(p == plan for p in plans)  # copies of the journaled plan, its stamp included
-        np.testing.assert_array_equal(node.targets, [[0.0, 0.1]])
+        np.testing.assert_array_equal(node.episode_state.targets, [[0.0, 0.1]])
 
 
 def test_an_old_journal_is_not_resumed(tmp_path):

@@ -5,6 +5,7 @@ nodes make; test_system.py replays a bag recorded from the real node processes.
 """
 
 import argparse
+import dataclasses
 import json
 
 import numpy as np
@@ -15,7 +16,7 @@ from std_msgs.msg import Header
 from tactile_dock_ros.msg import ExecutionReport
 
 from tactile_dock_ros.core import planner, problems, simulate
-from tactile_dock_ros.core.history import History
+from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.nodes import convert
 from tactile_dock_ros.tools import bag, replay
@@ -46,29 +47,20 @@ def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
         t = next(clock)
         messages.append((topic, t, to_msg(value, _header(t), *rest)))
 
-    history, targets, start = History(), [], np.asarray(problem.start, float)
+    state = EpisodeState(tool=problem.start)
+    config = dataclasses.replace(DEFAULTS.config, load=problem.load, compliant=False)
     put("/terrain_prior", convert.shape_to_msg, problem.prior)
     for plan_id in range(1, CYCLES + 1):
-        put("/contact_history", convert.history_to_msg, history)
+        history = state.history
+        put("/contact_history", convert.history_to_msg, state)
         samples = sample_posterior(problem.prior, history, 40, rng).vertices
         put("/shape_samples", convert.samples_to_msg, samples, "hmc", 1.0, len(history))
-        result = planner.plan(
-            samples,
-            problem.prior,
-            history,
-            start,
-            problem.load,
-            problem.prior.friction,
-            DEFAULTS.contact_resolution,
-            np.array(targets).reshape(-1, 2),
-            give_up_threshold=DEFAULTS.give_up_threshold,
-            compliant=False,
-        )
+        result = planner.plan(samples, problem.prior, state, config)
         dock = result.decision == "dock"
         command = convert.PlanCommand(
             plan_id,
             dock,
-            result.path if dock else start[None],
+            result.path if dock else state.tool[None],
             problem.load,
             3.0,
             0.1,
@@ -93,7 +85,7 @@ def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
             problem.prior.friction,
             problem.load,
             compliant=False,
-            contact_resolution=DEFAULTS.contact_resolution,
+            contact_resolution=config.contact_resolution,
         )
         outcome = (
             ExecutionReport.DOCKED
@@ -104,9 +96,8 @@ def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
         )
         report = convert.Report(plan_id, outcome, run.observations, run.stop_point, "", episode)
         put("/execution_report", convert.report_to_msg, report)
-        history = history.extend(run.observations.a, run.observations.b, run.observations.status)
-        targets.append(result.target_point)
-        start = run.stop_point
+        state = state.record(run.observations, plan_id).aim(result.target_point)
+        state = state.move(run.stop_point)
 
 
 @pytest.fixture(scope="module")
@@ -197,10 +188,12 @@ def test_replay_reproduces_every_recorded_plan(recorded, tmp_path, capsys):
     assert len(cycles) == 2 * CYCLES  # resent copies are one plan; two episodes
     assert [c.episode for c in cycles] == [1795315710] * CYCLES + [1795316710] * CYCLES
     first, second = cycles[0], cycles[1]
-    assert len(first.previous_targets) == 0 and len(cycles[CYCLES].previous_targets) == 0
+    assert len(first.state.targets) == 0 and len(cycles[CYCLES].state.targets) == 0
     if first.recorded.dock:  # eq. (24) novelty: the next cycle knows the earlier aim point
         assert first.outcome in ("DOCKED", "CONTACT_FAILED", "NO_CONTACT")  # its report
-        np.testing.assert_array_equal(second.previous_targets[0], first.recorded.target_point)
+        np.testing.assert_array_equal(second.state.targets[0], first.recorded.target_point)
+        assert second.state.move_ids.tolist() == [1] * len(second.state.history)  # plan 1's rows
+    np.testing.assert_array_equal(first.state.tool, first.recorded.waypoints[0])
     rows = [replay.compare(c, replay.replan(c, DEFAULTS)) for c in cycles]
     assert all(r["same"] for r in rows), rows
     out = tmp_path / "replay.json"
@@ -275,11 +268,8 @@ def test_config_file_sets_the_planner_parameters(recorded, tmp_path):
     config = tmp_path / "planner.yaml"
     config.write_text("planner:\n  ros__parameters:\n    give_up_threshold: 0.5\n")
     settings = _settings(config=config, contact_resolution=0.02, compliant=True)
-    assert (settings.give_up_threshold, settings.contact_resolution, settings.compliant) == (
-        0.5,
-        0.02,
-        True,
-    )
+    assert (settings.config.give_up_threshold, settings.config.contact_resolution) == (0.5, 0.02)
+    assert settings.compliant
 
 
 def test_bad_input_is_a_clear_error(recorded, tmp_path, capsys):

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_dock_ros.core import explore, planner, problems, simulate, slides
+from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
 
@@ -126,10 +127,13 @@ def test_planner_drops_the_samples_a_slide_rules_out():
     up = np.array([0.0, 1e-3])
     samples = np.stack([slope, slope + up, slope - up, flat])
     prior = GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), closed=False, friction=MU)
-    args = (samples, prior, history, [0.05, 0.2], LOAD, MU, 0.01)
-    blind = planner.plan(*args)
-    assert blind.rejected == 0 and blind.decision == "dock"  # the level edge holds in 1 of 4
-    informed = planner.plan(*args, move_ids=[3, 3])
-    assert informed.rejected == 1 and informed.decision == "give_up", informed.reason
-    pair = planner.plan(np.stack([slope, flat]), *args[1:], move_ids=[3, 3])
+    blind, config = EpisodeState(history, tool=[0.05, 0.2]), PlannerConfig(LOAD, 0.01)
+    plan = planner.plan(samples, prior, blind, config)  # moves unknown: no slide
+    assert plan.rejected == 0 and plan.decision == "dock"  # the level edge holds in 1 of 4
+    informed = blind.with_history(history, [3, 3])
+    plan = planner.plan(samples, prior, informed, config)
+    assert plan.rejected == 1 and plan.decision == "give_up", plan.reason
+    plan = planner.plan(samples, prior, informed.sampled(dropped=[1]), config)
+    assert plan.rejected == 0 and plan.decision == "dock"  # a dropped row takes no part
+    pair = planner.plan(np.stack([slope, flat]), prior, informed, config)
     assert pair.rejected == 1 and pair.decision == "dock"  # fewer than two pass: all kept

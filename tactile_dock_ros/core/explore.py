@@ -13,12 +13,14 @@ information-gain probes, repeating (cycle 1, 4, 7, ... greedy).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import planner, sampling, simulate
+from .episode import EpisodeState, PlannerConfig
 from .history import History, Status
 from .shape import GaussianShape
 
@@ -80,12 +82,14 @@ def run_episode(
     """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
 
     ``rng`` drives every random choice (default: ``np.random.default_rng(0)``), so the same
-    seed gives the same episode. Posterior chains are warm-started from the previous cycle's
-    samples (``sampling.sample_posterior(init_z=...)``). The planner gets each row's cycle, so
-    it drops samples on which a recorded compliant slide could not have happened (``slides``).
+    seed gives the same episode. The loop holds an ``episode.EpisodeState``: posterior chains
+    are warm-started from the previous cycle's samples (``sampling.sample_posterior(init_z=...)``)
+    and each history row records its cycle (from 1), so the planner drops samples on which a
+    recorded compliant slide could not have happened (``slides``).
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
-    image, ``perception.mock_camera.depth_prior``); the truth is still simulated with the
-    problem's load, friction, start and ``problem.prior.closed``.
+    image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
+    is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
+    Raises ValueError on a bad strategy, ``max_cycles`` or planner setting (``PlannerConfig``).
     """
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose from {STRATEGIES}")
@@ -93,36 +97,24 @@ def run_episode(
         raise ValueError(f"max_cycles must be >= 1, got {max_cycles}")
     rng = np.random.default_rng(0) if rng is None else rng
     prior = problem.prior if prior is None else prior
-    history = History()
-    move_ids = np.zeros(0, dtype=int)  # per history row: the cycle that observed it, from 1
+    config = PlannerConfig(
+        problem.load, problem.contact_resolution, give_up_threshold, compliant=compliant
+    )
+    state = EpisodeState(tool=problem.start)
     log: list[CycleLog] = []
-    targets = np.zeros((0, 2))
-    tool = np.asarray(problem.start, float)
-    z_previous = None
     try:
         for cycle in range(max_cycles):
             t0 = time.perf_counter()
             post = sampling.sample_posterior(
-                prior, history, n_samples, rng, method, init_z=z_previous
+                prior, state.history, n_samples, rng, method, init_z=state.warm_start
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:
-                return _finish(history, log, "error", f"inference returned {len(post.z)} samples")
-            z_previous = post.z
+                return _finish(state, log, "error", f"inference returned {len(post.z)} samples")
+            state = state.sampled(post.z, post.dropped)
+            objective = _objective(strategy, cycle)
             decision = planner.plan(
-                post.vertices,
-                prior,
-                history,
-                tool,
-                problem.load,
-                problem.friction,
-                problem.contact_resolution,
-                targets,
-                give_up_threshold,
-                objective=_objective(strategy, cycle),
-                compliant=compliant,
-                move_ids=move_ids,
-                dropped=post.dropped,
+                post.vertices, prior, state, dataclasses.replace(config, objective=objective)
             )
             t2 = time.perf_counter()
             entry = dict(
@@ -133,13 +125,13 @@ def run_episode(
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
                 rejected=decision.rejected,
-                history_length=len(history),
+                history_length=len(state.history),
             )
             if decision.decision == "give_up":
                 log.append(
                     CycleLog(**entry, docked=False, contact=False, stop_point=np.full(2, np.nan))
                 )
-                return _finish(history, log, "gave_up", decision.reason)
+                return _finish(state, log, "gave_up", decision.reason)
             run = simulate.guarded_path(
                 ground_truth,
                 problem.prior.closed,
@@ -161,15 +153,14 @@ def run_episode(
                     problem.load,
                     problem.contact_resolution,
                 )
-            history = history.extend(evidence.a, evidence.b, evidence.status)
-            move_ids = np.concatenate([move_ids, np.full(len(evidence), cycle + 1)])
-            targets = np.vstack([targets, decision.target_point])
+            state = state.record(evidence, cycle + 1)
             tool = _backed_off(run, decision.path, problem.contact_resolution)
+            state = state.aim(decision.target_point).move(tool)
             if run.docked:
-                return _finish(history, log, "docked", f"docked at {np.round(run.stop_point, 4)}")
+                return _finish(state, log, "docked", f"docked at {np.round(run.stop_point, 4)}")
     except Exception as error:  # the loop reports every failure, never raises
-        return _finish(history, log, "error", f"{type(error).__name__}: {error}")
-    return _finish(history, log, "cycle_cap", f"no dock after {max_cycles} cycles")
+        return _finish(state, log, "error", f"{type(error).__name__}: {error}")
+    return _finish(state, log, "cycle_cap", f"no dock after {max_cycles} cycles")
 
 
 def slide_evidence(
@@ -238,12 +229,12 @@ def _backed_off(run, path: np.ndarray, contact_resolution: float) -> np.ndarray:
     return np.asarray(path[-1], float)
 
 
-def _finish(history, log, outcome: str, message: str) -> EpisodeResult:
+def _finish(state: EpisodeState, log, outcome: str, message: str) -> EpisodeResult:
     return EpisodeResult(
         docked=outcome == "docked",
         gave_up=outcome == "gave_up",
         cycles=sum(1 for c in log if c.plan.decision == "dock"),
-        history=history,
+        history=state.history,
         cycles_log=log,
         outcome=outcome,
         message=message,

@@ -37,11 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import probsim, simulate, slides
+from .episode import OBJECTIVES, EpisodeState, PlannerConfig
 from .freespace import FreeSpace, likely_obstacle_region
-from .history import Status
+from .history import History, Status
 from .shape import GaussianShape
 
-OBJECTIVES = ("ours", "greedy", "window", "info_gain")
 # An edge faces the load when the push has at least this component against its outward normal.
 _MIN_FACING = 0.05
 # Longest search along a terminal segment's backward ray, in ray steps.
@@ -86,7 +86,9 @@ class Plan:
     rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
 
 
-def retrace(history, start: np.ndarray, space: FreeSpace, step: float) -> np.ndarray | None:
+def retrace(
+    history: History, start: np.ndarray, space: FreeSpace, step: float
+) -> np.ndarray | None:
     """Path (L, 2) from ``start`` back along the tool's own free moves to a point outside the
     likely-obstacle region, or None.
 
@@ -97,8 +99,6 @@ def retrace(history, start: np.ndarray, space: FreeSpace, step: float) -> np.nda
     the one ending at ``start`` retraces space the tool has crossed (no sample consistent with
     the history intersects it). Not a hot path: one walk over the history per plan.
     """
-    if history is None:
-        return None
     free = np.flatnonzero(np.asarray(history.status) == Status.FREE)
     path = [np.asarray(start, float)]
     for k in free[::-1]:
@@ -110,7 +110,7 @@ def retrace(history, start: np.ndarray, space: FreeSpace, step: float) -> np.nda
     return None
 
 
-def _lead(space: FreeSpace, start: np.ndarray, history, step: float) -> np.ndarray | None:
+def _lead(space: FreeSpace, start: np.ndarray, history: History, step: float) -> np.ndarray | None:
     """The path's first part: ``start`` alone in free space, else a way out of the
     likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None."""
     if not space.blocked(start)[0]:
@@ -290,81 +290,47 @@ def _give_up(rejected: int, reason: str, candidates: Candidates | None = None) -
     )
 
 
-def _check_inputs(samples, shape, start, load, friction, contact_resolution, threshold):
+def _check_inputs(samples: np.ndarray, shape: GaussianShape, state: EpisodeState) -> None:
     if samples.ndim != 3 or samples.shape[1:] != (shape.n_vertices, 2) or len(samples) < 2:
         raise ValueError(
             f"samples must be (N >= 2, {shape.n_vertices}, 2) for this shape, got {samples.shape}"
         )
     if not np.all(np.isfinite(samples)):
         raise ValueError("samples must be finite")
-    if start.shape != (2,) or not np.all(np.isfinite(start)):
-        raise ValueError(f"start must be a finite 2-vector, got {start}")
-    if load.shape != (2,) or not np.all(np.isfinite(load)) or np.linalg.norm(load) < 1e-12:
-        raise ValueError(f"load must be a finite nonzero 2-vector, got {load}")
-    if not (np.isfinite(friction) and friction >= 0):
-        raise ValueError(f"friction must be finite and >= 0, got {friction}")
-    if not (np.isfinite(contact_resolution) and contact_resolution > 0):
-        raise ValueError(f"contact_resolution must be > 0 metres, got {contact_resolution}")
-    if not (0 <= threshold < 1):
-        raise ValueError(f"give_up_threshold must be in [0, 1), got {threshold}")
+    if state.tool is None:
+        raise ValueError("the tool position is unknown (EpisodeState.tool)")
 
 
 def plan(
-    samples: np.ndarray,
-    shape: GaussianShape,
-    history=None,
-    start: np.ndarray = (0.0, 0.0),
-    load: np.ndarray = (0.0, -1.0),
-    friction: float = 0.5,
-    contact_resolution: float = 0.01,
-    previous_targets: np.ndarray = (),
-    give_up_threshold: float = 1e-3,
-    *,
-    objective: str = "ours",
-    compliant: bool = True,
-    max_path_attempts: int = 20,
-    move_ids=None,
-    dropped=(),
+    samples: np.ndarray, shape: GaussianShape, state: EpisodeState, config: PlannerConfig
 ) -> Plan:
     """Best docking plan for posterior vertex samples (N, n, 2), or a give-up (Sec. V-B).
 
     Args:
         samples: posterior vertex samples; their moment fit is the Gaussian of the estimate.
-        shape: prior (topology: ``closed``, edges; vertex count).
-        history: the observations the samples are conditioned on. The samples already satisfy
-            each one (eq. 13); the planner reads it only for the slides (``move_ids``).
-        start: current tool position, metres.
-        load: unit push direction of the loading move (normalized here).
-        friction: Coulomb coefficient.
-        contact_resolution: w of eq. (24), metres; also the planner's step and LOR margin scale.
-        previous_targets: (k, 2) aim points of earlier plans (eq. 24's P).
-        give_up_threshold: give up when the best (capped) P_dock over all edges is below it.
-        objective: one of ``OBJECTIVES`` (see ``score``).
-        compliant: motion model of the probabilistic simulation.
-        max_path_attempts: at most this many candidates are path-planned before giving up.
-        move_ids: (k,) the move (plan id, from 1; 0 unknown) that observed each history row;
-            with it, samples on which a recorded compliant slide could not have happened are
-            dropped first (``slides.consistent_with_slides``; ``Plan.rejected`` counts them).
-            Decision: if fewer than two pass (the moment fit needs two) all are kept; the
-            count tells.
-        dropped: history rows the sampler ignored as inconsistent (``PosteriorSamples.dropped``,
-            ``ShapeSamples.dropped_segments``); they take no part in a slide.
+        shape: prior (topology: ``closed``, edges; vertex count; ``friction``, the Coulomb
+            coefficient).
+        state: the episode so far. The samples already satisfy each history row (eq. 13); the
+            planner reads the history only for the slides: samples on which a recorded
+            compliant slide (``state.move_ids``; rows in ``state.dropped`` take no part) could
+            not have happened are dropped first (``slides.consistent_with_slides``;
+            ``Plan.rejected`` counts them). Decision: if fewer than two pass (the moment fit
+            needs two) all are kept; the count tells. The plan starts at ``state.tool`` and
+            eq. (24)'s bonus keeps away from ``state.targets``.
+        config: the planner settings (``PlannerConfig``).
 
     Raises ValueError on malformed input; an infeasible situation is a give-up with a reason.
     """
     samples = np.asarray(samples, float)
-    start = np.asarray(start, float).reshape(-1)
-    load = np.asarray(load, float).reshape(-1)
-    _check_inputs(samples, shape, start, load, friction, contact_resolution, give_up_threshold)
-    load = load / np.linalg.norm(load)
-    rejected = 0
-    if move_ids is not None and history is not None:
-        keep = slides.consistent_with_slides(
-            samples, shape.closed, history, move_ids, load, friction, dropped
-        )
-        rejected = int(len(keep) - keep.sum())
-        samples = samples[keep] if keep.sum() >= 2 else samples
-    step = 0.5 * contact_resolution
+    _check_inputs(samples, shape, state)
+    start, load, friction = state.tool, np.asarray(config.load), shape.friction
+    objective, compliant = config.objective, config.compliant
+    keep = slides.consistent_with_slides(
+        samples, shape.closed, state.history, state.move_ids, load, friction, state.dropped
+    )
+    rejected = int(len(keep) - keep.sum())
+    samples = samples[keep] if keep.sum() >= 2 else samples
+    step = 0.5 * config.contact_resolution
     lor = likely_obstacle_region(samples, shape.edges, margin=step)
     space = FreeSpace(lor, samples.mean(axis=0), shape.closed, start)
     segments = terminal_segments(samples, shape.edges, load, space, step)
@@ -374,18 +340,20 @@ def plan(
     holding = holding_frequencies(samples, shape.closed, load, friction)
     candidates = evaluate(posterior, segments, load, compliant, holding)
     best = float(candidates.p_dock.max())
-    if best < give_up_threshold:
+    if best < config.give_up_threshold:
         return _give_up(
             rejected,
-            f"best docking probability {best:.2e} < threshold {give_up_threshold:g}",
+            f"best docking probability {best:.2e} < threshold {config.give_up_threshold:g}",
             candidates,
         )
-    lead = _lead(space, start, history, step)
+    lead = _lead(space, start, state.history, step)
     if lead is None:
         return _give_up(rejected, "the tool is inside the likely-obstacle region with no way out")
-    values = score(candidates, objective, previous_targets, contact_resolution, give_up_threshold)
+    values = score(
+        candidates, objective, state.targets, config.contact_resolution, config.give_up_threshold
+    )
     order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
-    for j in order[:max_path_attempts]:
+    for j in order[: config.max_path_attempts]:
         tail = candidates.start[j : j + 1]
         if candidates.needs_exit[j]:
             exit_path = space.ascend(candidates.start[j], step)

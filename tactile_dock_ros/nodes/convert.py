@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
+from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import (
@@ -212,13 +213,18 @@ def history_from_segments(segments) -> History:
         raise MessageError(str(err)) from err
 
 
-def plan_ids_from_segments(segments) -> np.ndarray:
-    """(k,) the plan that observed each ContactSegment (the planner's slides, core.slides)."""
-    return np.array([s.plan_id for s in segments], dtype=int)
+def history_to_msg(state: EpisodeState, header: Header) -> ContactHistory:
+    """The episode's history, each segment with the plan that observed it (``move_ids``)."""
+    segments = segments_to_msgs(state.history, header, state.move_ids)
+    return ContactHistory(header=header, segments=segments)
 
 
-def history_to_msg(history: History, header: Header, plan_ids=0) -> ContactHistory:
-    return ContactHistory(header=header, segments=segments_to_msgs(history, header, plan_ids))
+def history_from_msg(msg: ContactHistory, state: EpisodeState | None = None) -> EpisodeState:
+    """``state`` (default: a new episode's) with the message's history and each row's plan id
+    (the planner's slides, core.slides) in place of its own (``EpisodeState.with_history``)."""
+    history = history_from_segments(msg.segments)
+    plan_ids = np.array([s.plan_id for s in msg.segments], dtype=int)
+    return (EpisodeState() if state is None else state).with_history(history, plan_ids)
 
 
 # --------------------------------------------------------------------------- posterior samples

@@ -1,10 +1,11 @@
 """inference: the contact history and posterior shape samples (paper Sec. IV).
 
-Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of
-the current episode count; latched, so reports sent while this node was down arrive when it
-starts) and ``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the
-history). Keeps the history, publishes it latched on ``contact_history`` (once an episode id
-came) and, after every change while an episode runs, samples the posterior with
+Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of the
+current episode count; latched, so reports sent while this node was down arrive when it starts) and
+``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the history).
+Keeps the history in a ``core.episode.EpisodeState`` (each row with the plan that observed it; the
+previous posterior, the sampler's warm start), publishes it latched on ``contact_history`` (once an
+episode id came) and, after every change while an episode runs, samples the posterior with
 ``core.sampling.sample_posterior`` and publishes ``shape_samples`` (latched) and RViz markers on
 ``~/markers``.
 
@@ -21,6 +22,7 @@ changed meanwhile is dropped and the newest history sampled instead.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections import deque
 from functools import partial
@@ -32,6 +34,7 @@ from rclpy.node import Node
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
+from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
@@ -65,10 +68,9 @@ class InferenceNode(Node):
         self.p = declare(self, PARAMS)
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
-        self.last_z = None  # (N, m) previous posterior in z, for the sampler's warm start
+        # the history with each row's plan, and the previous posterior (the warm start)
+        self.episode_state = EpisodeState()
         self.frame_id = self.p.plane_frame_id
-        self.history = History()
-        self.plan_ids = np.zeros(0, int)
         self.handled_plans: set[int] = set()
         self.episode = 0
         self.past_episodes: set[int] = set()  # ids that ended here: a late copy is no new one
@@ -93,7 +95,8 @@ class InferenceNode(Node):
     def on_prior(self, msg: ShapeDistribution) -> None:
         prior = convert.shape_from_msg(msg)
         with self.lock:
-            self.prior, self.last_z = prior, None
+            self.prior = prior
+            self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
         self.get_logger().info(f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns")
         self.changed()
 
@@ -107,13 +110,12 @@ class InferenceNode(Node):
         with self.lock:
             self.past_episodes.add(self.episode)
             self.episode = episode
-            self.history, self.plan_ids = History(), np.zeros(0, int)
-            self.last_z = None
+            self.episode_state = EpisodeState()
             self.handled_plans.clear()
             restored = self.restore()
         self.get_logger().info(
             f"episode {self.episode}: history restored from the journal, {restored} reports "
-            f"({len(self.history)} segments)"
+            f"({len(self.episode_state.history)} segments)"
             if restored
             else f"episode {self.episode}: history cleared"
         )
@@ -137,7 +139,7 @@ class InferenceNode(Node):
                 self.add(record["plan_id"], History(record["a"], record["b"], record["status"]))
         except (KeyError, TypeError, ValueError) as err:
             self.get_logger().error(f"{self.journal.path}: bad record ({err}); history cleared")
-            self.history, self.plan_ids = History(), np.zeros(0, int)
+            self.episode_state = EpisodeState()
             self.handled_plans.clear()
             self.journal.reset([{"episode": self.episode}])
             return 0
@@ -173,35 +175,29 @@ class InferenceNode(Node):
         return True
 
     def add(self, plan_id: int, new: History) -> None:
+        self.episode_state = self.episode_state.record(new, plan_id)
         self.handled_plans.add(plan_id)
-        self.history = self.history.extend(new.a, new.b, new.status)
-        self.plan_ids = np.concatenate([self.plan_ids, np.full(len(new), plan_id)])
 
     def changed(self) -> None:
         """Publish the episode's history now and wake the sampler (its own thread); nothing
         before an episode id came (a restarted node would publish an empty history)."""
         with self.lock:
             self.generation += 1
-            history, plan_ids, frame_id = self.history, self.plan_ids, self.frame_id
+            state, frame_id = self.episode_state, self.frame_id
         if self.episode == 0:
             return
-        stamp = header(self, frame_id)
-        self.history_pub.publish(convert.history_to_msg(history, stamp, plan_ids))
+        self.history_pub.publish(convert.history_to_msg(state, header(self, frame_id)))
         self.sampler.trigger()
 
     def sample(self) -> None:
         """Sample and publish the posterior of the current history (the guard condition's
         callback); a result overtaken by a newer history is dropped (that one is sampled)."""
         with self.lock:
-            generation, prior, history, init_z = (
-                self.generation,
-                self.prior,
-                self.history,
-                self.last_z,
-            )
+            generation, prior, state = self.generation, self.prior, self.episode_state
             episode, cycle, frame_id = self.episode, len(self.handled_plans) + 1, self.frame_id
         if prior is None or episode == 0:
             return
+        history = state.history
         try:
             posterior = sample_posterior(
                 prior,
@@ -209,7 +205,7 @@ class InferenceNode(Node):
                 self.p.num_samples,
                 self.rng,
                 method=self.p.method,
-                init_z=init_z,  # warm start from the previous cycle's posterior
+                init_z=state.warm_start,  # warm start from the previous cycle's posterior
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
@@ -218,7 +214,7 @@ class InferenceNode(Node):
             if generation != self.generation:
                 return  # the state changed while sampling: the newer trigger resamples
             if posterior is not None:
-                self.last_z = posterior.z if len(posterior.z) else None
+                self.episode_state = state.sampled(posterior.z, posterior.dropped)
         if posterior is None or len(posterior.vertices) < 2:
             # the planner needs two (moment fit); tell it there are none
             count = 0 if posterior is None else len(posterior.vertices)

@@ -1,17 +1,18 @@
 """planner: docking plans from posterior samples (paper Sec. V-B), and the episode loop.
 
-An episode starts with the ``start_episode`` service (std_srvs/Trigger), refused while one runs
-or before a ``terrain_prior`` arrived: the node publishes a new id on ``episode`` (latched),
-which empties inference's history. The id is the node clock's milliseconds at the start, mod
-2^32, so a restarted planner never reuses one; plans carry it, and reports of other episodes
-(a late report, a restarted node) are ignored. Each cycle it waits for
-``shape_samples`` conditioned on the whole current ``contact_history`` (stamped after the
-episode start) and the tool position (``tool_pose``), calls ``core.planner.plan`` and publishes
-a ``plan`` (DockingPlan). The executor's ``execution_report`` ends the cycle. The episode ends
-DOCKED (a report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without
-docking) or ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/
-DiagnosticStatus, latched) carries the state, the prior's vertex count (0: none yet) and the
-per-cycle latencies.
+An episode starts with the ``start_episode`` service (std_srvs/Trigger), refused while one runs or
+before a ``terrain_prior`` arrived: the node publishes a new id on ``episode`` (latched), which
+empties inference's history. The id is the node clock's milliseconds at the start, mod 2^32, so a
+restarted planner never reuses one; plans carry it, and reports of other episodes (a late report, a
+restarted node) are ignored. Each cycle it waits for ``shape_samples`` conditioned on the whole
+current ``contact_history`` (stamped after the episode start) and the tool position (``tool_pose``),
+calls ``core.planner.plan`` and publishes a ``plan`` (DockingPlan). What it plans on is one
+``core.episode.EpisodeState`` (the history with each row's plan id, the tool position, the aim
+points of the episode's plans) and one ``PlannerConfig`` (the parameters, mapped once by
+``planner_config``). The executor's ``execution_report`` ends the cycle. The episode ends DOCKED (a
+report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without docking) or
+ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/DiagnosticStatus, latched)
+carries the state, the prior's vertex count (0: none yet) and the per-cycle latencies.
 
 Restart without loss: with ``state_directory`` set, the episode's events (start, each plan with
 its serialized message, each report's outcome, the end) go to a journal (``nodes.journal``,
@@ -37,6 +38,7 @@ from rclpy.time import Time
 from std_msgs.msg import UInt32
 from std_srvs.srv import Trigger
 
+from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.planner import plan as plan_docking
 from tactile_dock_ros.msg import (
     ContactHistory,
@@ -79,6 +81,21 @@ PARAMS = [
     ),
 ]
 
+
+def planner_config(p) -> PlannerConfig:
+    """The planner parameters (``PARAMS`` values, by attribute) as ``core.planner`` settings:
+    the one mapping, shared with ``tools.replay``."""
+    load = np.asarray(p.load_direction, float)
+    if abs(np.linalg.norm(load) - 1.0) > convert.UNIT_TOLERANCE:
+        raise ValueError(f"parameter load_direction must be a unit vector, got {load}")
+    return PlannerConfig(
+        load=load,
+        contact_resolution=p.contact_resolution,
+        give_up_threshold=p.give_up_threshold,
+        compliant=p.compliant,
+    )
+
+
 RESEND_PERIOD = 0.5  # seconds between copies of the plan being executed (executor heartbeat)
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
 
@@ -87,21 +104,16 @@ class PlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("planner", **kwargs)
         self.p = declare(self, PARAMS)
-        load = np.asarray(self.p.load_direction, float)
-        if abs(np.linalg.norm(load) - 1.0) > convert.UNIT_TOLERANCE:
-            raise ValueError(f"parameter load_direction must be a unit vector, got {load}")
-        self.load = load
+        self.config = planner_config(self.p)
         self.plane = plane_frame(self.p)
         self.prior = None
-        self.tool = None
-        self.history = None
-        self.history_plan_ids = np.zeros(0, int)  # per history row: the plan that observed it
+        # history with each row's plan (from contact_history), tool (tool_pose), aim points
+        self.episode_state = EpisodeState()
         self.samples = None  # (msg, vertices) of the newest samples
         self.episode = 0
         self.state = IDLE
         self.awaiting_plan = None  # plan_id being executed
         self.cycles: list[dict] = []
-        self.targets: list[np.ndarray] = []
         self.episode_start = None
         self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
@@ -132,12 +144,11 @@ class PlannerNode(Node):
             self.publish_status()  # tells clients that start_episode will be accepted
 
     def on_pose(self, msg: PoseStamped) -> None:
-        self.tool = convert.pose_position(msg, self.plane)
+        self.episode_state = self.episode_state.move(convert.pose_position(msg, self.plane))
         self.maybe_plan()
 
     def on_history(self, msg: ContactHistory) -> None:
-        self.history = convert.history_from_segments(msg.segments)
-        self.history_plan_ids = convert.plan_ids_from_segments(msg.segments)
+        self.episode_state = convert.history_from_msg(msg, self.episode_state)
         self.maybe_plan()
 
     def on_samples(self, msg: ShapeSamples) -> None:
@@ -156,7 +167,8 @@ class PlannerNode(Node):
             return response
         stamp_ms = (self.get_clock().now().nanoseconds // 1_000_000) % 2**32
         self.episode = stamp_ms if stamp_ms not in (0, self.episode) else self.episode + 1
-        self.state, self.cycles, self.targets = RUNNING, [], []
+        self.state, self.cycles = RUNNING, []
+        self.episode_state = EpisodeState(tool=self.episode_state.tool)  # inference clears too
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
         self.stage_start = now_seconds(self)
@@ -222,9 +234,8 @@ class PlannerNode(Node):
         return (
             fresh
             and self.prior is not None
-            and self.tool is not None
-            and self.history is not None
-            and msg.history_length == len(self.history)
+            and self.episode_state.tool is not None
+            and msg.history_length == len(self.episode_state.history)
             # the last report's evidence is in
             and msg.history_length >= (self.cycles[-1]["next_history"] if self.cycles else 0)
         )
@@ -254,27 +265,28 @@ class PlannerNode(Node):
             else:
                 self.get_logger().info(message)
         dock = result.decision == "dock"
+        history_length = len(self.episode_state.history)
         command = convert.PlanCommand(
             plan_id=len(self.cycles) + 1,
             dock=dock,
             # A give-up carries the tool position alone, so a recorded plan is self-contained.
-            waypoints=np.asarray(result.path if dock else self.tool, float).reshape(-1, 2),
-            load=self.load,
+            waypoints=np.asarray(result.path if dock else self.episode_state.tool).reshape(-1, 2),
+            load=np.asarray(self.config.load),
             force_threshold=self.p.contact_force_threshold,
             max_speed=self.p.max_speed,
-            compliant=self.p.compliant,
+            compliant=self.config.compliant,
             p_dock=result.p_dock,
             objective=result.objective,
             target_edge=result.target_edge if dock else -1,
             reason=result.reason,
             target_point=result.target_point,
             episode=self.episode,
-            history_length=len(self.history),
+            history_length=history_length,
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
         event = {
             "event": "plan",
-            "history_length": len(self.history),
+            "history_length": history_length,
             "p_dock": float(result.p_dock),
             "inference_s": float(msg.compute_time),
             "planning_s": watch.seconds,
@@ -308,7 +320,7 @@ class PlannerNode(Node):
             out = deserialize_message(base64.b64decode(event["msg"]), DockingPlan)
             self.awaiting_plan = out.plan_id
             self.last_plan = (out, now_seconds(self))
-            self.targets.append(np.asarray(event["target"], float))  # eq. (24) novelty
+            self.episode_state = self.episode_state.aim(event["target"])  # eq. (24) novelty
 
     def end_cycle(self, event: dict, interrupted: bool) -> None:
         """Record the report of the plan being executed (``event``: its journal record)."""
@@ -339,7 +351,8 @@ class PlannerNode(Node):
                 self.replay(event)
         except (KeyError, TypeError, ValueError, IndexError) as err:
             self.get_logger().error(f"{self.journal.path}: bad record ({err}); not resumed")
-            self.state, self.episode, self.cycles, self.targets = IDLE, 0, [], []
+            self.state, self.episode, self.cycles = IDLE, 0, []
+            self.episode_state = EpisodeState(tool=self.episode_state.tool)
             self.awaiting_plan = None
             return ""
         if self.state != RUNNING:
@@ -363,7 +376,8 @@ class PlannerNode(Node):
     def replay(self, event: dict) -> None:
         kind = event["event"]
         if kind == "start":
-            self.episode, self.state, self.cycles, self.targets = event["episode"], RUNNING, [], []
+            self.episode, self.state, self.cycles = event["episode"], RUNNING, []
+            self.episode_state = EpisodeState(tool=self.episode_state.tool)
             clock_type = self.get_clock().clock_type
             self.episode_start = Time(nanoseconds=event["start_ns"], clock_type=clock_type)
         elif kind == "plan":
@@ -376,20 +390,8 @@ class PlannerNode(Node):
     def plan(self, vertices: np.ndarray, dropped=()):
         """``core.planner.plan`` on the node's state; ``dropped``: the history rows inference
         ignored (ShapeSamples.dropped_segments)."""
-        return plan_docking(
-            vertices,
-            self.prior,
-            self.history,
-            self.tool,
-            self.load,
-            self.prior.friction,
-            self.p.contact_resolution,
-            np.array(self.targets).reshape(-1, 2),
-            give_up_threshold=self.p.give_up_threshold,
-            compliant=self.p.compliant,
-            move_ids=self.history_plan_ids,
-            dropped=dropped,
-        )
+        state = self.episode_state.sampled(dropped=dropped)
+        return plan_docking(vertices, self.prior, state, self.config)
 
     # ------------------------------------------------------------------ episode status
 

@@ -40,7 +40,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, UInt32
 
 from tactile_dock_ros.core import problems
-from tactile_dock_ros.core.history import History
+from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.msg import ContactHistory, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import node_class
@@ -87,15 +87,19 @@ def bases(now_s: int, live: dict) -> dict:
     the suite's own content, e.g. the prior)."""
     plane, base = _header(now_s, PLANE_FRAME), _header(now_s, BASE_FRAME)
     prior = problems.get(ARGUMENTS["problem"]).prior
-    history = _seed_history()
+    seeded = _seed_state()
     frame = convert.PlaneFrame([0.0, 0.6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
     camera = _header(now_s, "depth_camera")
     K = np.array([[30.0, 0.0, 15.5], [0.0, 30.0, 11.5], [0.0, 0.0, 1.0]])
     out = {
         "/terrain_prior": convert.shape_to_msg(prior, plane),
-        "/contact_history": convert.history_to_msg(history, plane, list(SEED_PLANS)),
+        "/contact_history": convert.history_to_msg(seeded, plane),
         "/shape_samples": convert.samples_to_msg(
-            np.repeat(prior.mean_vertices[None], 4, axis=0), plane, "hmc", 4.0, len(history)
+            np.repeat(prior.mean_vertices[None], 4, axis=0),
+            plane,
+            "hmc",
+            4.0,
+            len(seeded.history),
         ),
         "/plan": fuzz_messages.valid_plan(EPISODES[-1], PROBE_PLAN + 1, plane),
         "/execution_report": fuzz_messages.valid_report(EPISODES[-1], SEED_PLANS[0], -0.3, plane),
@@ -118,11 +122,12 @@ def _seed_reports(header: Header) -> list:
     return [fuzz_messages.valid_report(EPISODES[-1], p, -0.3 + 0.1 * p, header) for p in SEED_PLANS]
 
 
-def _seed_history() -> History:
-    histories = [convert.report_from_msg(r).history for r in _seed_reports(Header())]
-    return History().extend(
-        *(np.concatenate([getattr(h, f) for h in histories]) for f in ("a", "b", "status"))
-    )
+def _seed_state() -> EpisodeState:
+    """The episode as inference holds it once it has the seed reports."""
+    state = EpisodeState()
+    for report in map(convert.report_from_msg, _seed_reports(Header())):
+        state = state.record(report.history, report.plan_id)
+    return state
 
 
 def seed_messages(now_s: int) -> list[tuple[str, object]]:
@@ -171,7 +176,7 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
     for topic, msg in [*live.items(), *seed_messages(now_s)]:
         if topic in subscriptions:
             subscriptions[topic].callback(msg)
-    history = getattr(node, "history", None)
+    state = getattr(node, "episode_state", None)  # inference's and the planner's history
     out = {}
     for index, (topic, subscription) in enumerate(sorted(subscriptions.items())):
         rng = np.random.default_rng([seed, index])
@@ -197,8 +202,8 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
             if m.malformed and not dropped:
                 stats[f"accepted malformed: {m.kind}"] += 1
         out[topic] = {"messages": messages, **stats, "exceptions": dict(errors)}
-    if history is not None:
-        out["history_unchanged"] = _same_history(history, node.history)
+    if state is not None:
+        out["history_unchanged"] = _same_history(state.history, node.episode_state.history)
     return out
 
 

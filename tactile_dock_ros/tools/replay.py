@@ -7,12 +7,13 @@
 BAG is a rosbag2 directory with the topics of ``tools.bag.EPISODE_TOPICS`` (record them on the
 robot with ``ros2 bag record``; ``make demo DEMO_ARGS="--bag DIR"`` records the mock episode).
 For each recorded plan (one per cycle; the planner's resent copies are skipped) the planner
-node's inputs are rebuilt: the prior, the posterior samples it planned with and the contact
-history (those of the plan's ``history_length`` stamped last before it, ``load_cycles``), the
-tool position (the plan's first waypoint) and the aim points of the episode's earlier plans (eq.
-24). Then ``core.planner.plan`` runs again with the planner parameters of ``--config`` (the
-parameter file the robot ran with; the planner node's defaults otherwise), the load direction
-and motion model of the recorded plan, and any override given here. The planner is
+node's inputs are rebuilt: the prior, the posterior samples it planned with and its
+``core.episode.EpisodeState``: the contact history (samples and history of the plan's
+``history_length`` stamped last before it, ``load_cycles``), the tool position (the plan's first
+waypoint) and the aim points of the episode's earlier plans (eq. 24). Then
+``core.planner.plan`` runs again with the planner parameters of ``--config`` (the parameter
+file the robot ran with; the planner node's defaults otherwise), the load direction and motion
+model of the recorded plan, and any override given here. The planner is
 deterministic: with the recorded parameters every replayed plan equals the recorded one, so a
 difference means the code or a parameter changed. ``--resample N`` plans with N fresh posterior
 samples instead (``core.sampling.sample_posterior`` from the prior and history, cold-started,
@@ -25,14 +26,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import yaml
 
 from ..core import planner
-from ..core.history import History
+from ..core.episode import EpisodeState, PlannerConfig
 from ..core.sampling import METHODS, sample_posterior
 from ..core.shape import GaussianShape
 from . import bag, figures
@@ -46,25 +48,20 @@ class Cycle:
 
     episode: int  # the planner's episode id
     prior: GaussianShape
-    history: History
-    plan_ids: np.ndarray  # (k,) the plan that observed each history row (its slides)
+    # history with each row's plan, the rows inference dropped for ``samples``
+    # (dropped_segments), aim points of the episode's earlier DOCK plans, tool position (the
+    # plan's first waypoint)
+    state: EpisodeState
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
-    dropped: np.ndarray  # history rows inference ignored for them (dropped_segments)
-    previous_targets: np.ndarray  # (k, 2) aim points of the episode's earlier DOCK plans
     recorded: object  # nodes.convert.PlanCommand
     outcome: str  # the executor's report for the plan ("-": none recorded)
-
-    @property
-    def start(self) -> np.ndarray:
-        return self.recorded.waypoints[0]
 
 
 @dataclass(frozen=True)
 class Settings:
-    """Planner parameters of the replay (units as in the planner node)."""
+    """Planner settings of the replay: the planner node's (``planner_node.planner_config``)."""
 
-    give_up_threshold: float
-    contact_resolution: float  # metres
+    config: PlannerConfig  # its load is replaced by each recorded plan's
     compliant: bool | None  # None: as recorded in each plan
 
 
@@ -114,7 +111,7 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
     from ..nodes import convert
 
     priors: list = []
-    histories: dict[int, list] = {}  # length -> [(position, stamp, (History, plan ids))]
+    histories: dict[int, list] = {}  # length -> [(position, stamp, EpisodeState)]
     samples: dict[int, list] = {}  # history length -> [(position, stamp, (vertices, dropped))]
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
     plans, seen = [], set()
@@ -123,9 +120,8 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
         if topic == "/terrain_prior":
             priors.append((*entry, convert.shape_from_msg(msg)))
         elif topic == "/contact_history":
-            history = convert.history_from_segments(msg.segments)
-            ids = convert.plan_ids_from_segments(msg.segments)
-            histories.setdefault(len(history), []).append((*entry, (history, ids)))
+            state = convert.history_from_msg(msg)
+            histories.setdefault(len(state.history), []).append((*entry, state))
         elif topic == "/shape_samples" and msg.num_samples > 0:
             value = (convert.samples_from_msg(msg), np.array(msg.dropped_segments, int))
             samples.setdefault(int(msg.history_length), []).append((*entry, value))
@@ -161,7 +157,9 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
             log(f"{name}: skipped, no tool position")
             continue
         outcome = reports.get((episode, command.plan_id), "-")
-        cycles.append(Cycle(episode, prior, *recorded, *drawn, previous, command, outcome))
+        vertices, dropped = drawn
+        state = replace(recorded, dropped=dropped, targets=previous, tool=command.waypoints[0])
+        cycles.append(Cycle(episode, prior, state, vertices, command, outcome))
     if not cycles:
         raise bag.BagError(f"{path}: no plan with its inputs recorded (topics: /plan, ...)")
     return cycles
@@ -171,20 +169,11 @@ def replan(cycle: Cycle, settings: Settings, fresh=None) -> planner.Plan:
     """``core.planner.plan`` on the cycle's inputs, or on ``fresh`` posterior samples
     (``core.sampling.PosteriorSamples``) instead of the recorded ones."""
     compliant = cycle.recorded.compliant if settings.compliant is None else settings.compliant
-    return planner.plan(
-        cycle.samples if fresh is None else fresh.vertices,
-        cycle.prior,
-        cycle.history,
-        cycle.start,
-        cycle.recorded.load,
-        cycle.prior.friction,
-        settings.contact_resolution,
-        cycle.previous_targets,
-        give_up_threshold=settings.give_up_threshold,
-        compliant=compliant,
-        move_ids=cycle.plan_ids,
-        dropped=cycle.dropped if fresh is None else fresh.dropped,
-    )
+    config = replace(settings.config, load=cycle.recorded.load, compliant=compliant)
+    if fresh is None:
+        return planner.plan(cycle.samples, cycle.prior, cycle.state, config)
+    state = cycle.state.sampled(dropped=fresh.dropped)
+    return planner.plan(fresh.vertices, cycle.prior, state, config)
 
 
 def compare(cycle: Cycle, plan: planner.Plan) -> dict:
@@ -201,7 +190,7 @@ def compare(cycle: Cycle, plan: planner.Plan) -> dict:
     return {
         "episode": cycle.episode,
         "plan_id": recorded.plan_id,
-        "history_segments": len(cycle.history),
+        "history_segments": len(cycle.state.history),
         "recorded": {
             "decision": decision,
             "target_edge": recorded.target_edge,
@@ -220,11 +209,14 @@ def compare(cycle: Cycle, plan: planner.Plan) -> dict:
 
 
 def settings_from(args: argparse.Namespace) -> Settings:
-    """Planner parameters: node defaults < ``--config`` file < command-line overrides."""
-    from ..nodes.planner_node import PARAMS
+    """Planner parameters: node defaults < ``--config`` file < command-line overrides (of
+    ``give_up_threshold``, ``contact_resolution``); the load and motion model come from each
+    recorded plan in ``replan`` (the motion model unless ``--compliant`` is given)."""
+    from ..nodes.planner_node import PARAMS, planner_config
 
     table = {p.name: p for p in PARAMS}
-    values = {name: table[name].default for name in ("give_up_threshold", "contact_resolution")}
+    names = ("load_direction", "give_up_threshold", "contact_resolution", "compliant")
+    values = {name: table[name].default for name in names}
     if args.config is not None:
         document = yaml.safe_load(Path(args.config).read_text()) or {}
         for section in ("/**", "planner", "/planner"):
@@ -235,14 +227,12 @@ def settings_from(args: argparse.Namespace) -> Settings:
                     if k in values
                 }
             )
-    for name in values:
-        override = getattr(args, name)
-        if override is not None:
-            values[name] = override
-        table[name].check(values[name])  # the node's own range check
-    return Settings(
-        float(values["give_up_threshold"]), float(values["contact_resolution"]), args.compliant
-    )
+    for name in ("give_up_threshold", "contact_resolution"):
+        if getattr(args, name) is not None:
+            values[name] = getattr(args, name)
+    for name, value in values.items():
+        table[name].check(value)  # the node's own range check
+    return Settings(planner_config(SimpleNamespace(**values)), args.compliant)
 
 
 def render(cycles: list[Cycle], plans: list[planner.Plan], path: Path) -> None:
@@ -256,12 +246,12 @@ def render(cycles: list[Cycle], plans: list[planner.Plan], path: Path) -> None:
     for ax, cycle, plan in zip(axes.ravel(), cycles, plans, strict=False):
         for vertices in cycle.samples[:30]:
             figures.outline(ax, vertices, cycle.prior.closed, color="0.6", lw=0.5, alpha=0.5)
-        figures.history(ax, cycle.history)
+        figures.history(ax, cycle.state.history)
         if cycle.recorded.dock:
             ax.plot(*cycle.recorded.waypoints.T, color="tab:blue", lw=2.0, label="recorded")
         if plan.decision == "dock":
             ax.plot(*plan.path.T, "--", color="tab:orange", lw=1.5, label="replayed")
-        ax.plot(*cycle.start, "k.", ms=8)
+        ax.plot(*cycle.state.tool, "k.", ms=8)
         ax.set_title(
             f"episode {cycle.episode} plan {cycle.recorded.plan_id}: recorded P_dock "
             f"{cycle.recorded.p_dock:.2f} -> {cycle.outcome}\nreplayed {plan.decision} "
@@ -316,8 +306,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"replay: {err}", file=sys.stderr)
         return 2
     print(
-        f"{len(cycles)} recorded plans; give_up_threshold {settings.give_up_threshold:g}, "
-        f"contact_resolution {settings.contact_resolution:g} m"
+        f"{len(cycles)} recorded plans; give_up_threshold {settings.config.give_up_threshold:g}, "
+        f"contact_resolution {settings.config.contact_resolution:g} m"
     )
     rng = np.random.default_rng(args.seed)
     rows, plans = [], []
@@ -325,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         fresh = None
         if args.resample:
             fresh = sample_posterior(
-                cycle.prior, cycle.history, args.resample, rng, method=args.method
+                cycle.prior, cycle.state.history, args.resample, rng, method=args.method
             )
         plans.append(replan(cycle, settings, fresh))
         rows.append(compare(cycle, plans[-1]))
