@@ -35,11 +35,38 @@ from .shape import GaussianShape
 
 LOG = logging.getLogger(__name__)
 
-METHODS = ("hmc", "gibbs", "mh", "rejection")  # every sampler (the benchmark compares them)
-MCMC_METHODS = ("hmc", "gibbs", "mh")
-# what the nodes offer: MH is a benchmark baseline only (its chains barely move: split R-hat
-# ~4 on Fig. 9 problem 2; std 0.35-0.63 of the posterior's on problem 3 in the issue-12 audit)
-NODE_METHODS = ("hmc", "gibbs", "rejection")
+
+@dataclass(frozen=True)
+class Sampler:
+    """One posterior sampler of the registry ``SAMPLERS``.
+
+    Attributes:
+        name: the ``method`` string of ``sample_posterior``, the nodes and the tools.
+        mcmc: runs chains (``ChainRunner``); otherwise independent draws.
+        on_node: offered by the inference node's ``method`` parameter.
+        burn_in: default discarded moves per chain (cold seeds, warm seeds) for MCMC.
+    """
+
+    name: str
+    mcmc: bool
+    on_node: bool
+    burn_in: tuple[int, int] = (0, 0)
+
+
+SAMPLERS = {
+    s.name: s
+    for s in (
+        Sampler("hmc", mcmc=True, on_node=True, burn_in=(3, 1)),
+        Sampler("gibbs", mcmc=True, on_node=True, burn_in=(5, 1)),
+        # a benchmark baseline only: its chains barely move (split R-hat ~4 on Fig. 9 problem
+        # 2; std 0.35-0.63 of the posterior's on problem 3 in the issue-12 audit)
+        Sampler("mh", mcmc=True, on_node=False, burn_in=(200, 50)),
+        Sampler("rejection", mcmc=False, on_node=True),
+    )
+}
+METHODS = tuple(SAMPLERS)  # every sampler (the benchmark compares them)
+MCMC_METHODS = tuple(name for name, s in SAMPLERS.items() if s.mcmc)
+NODE_METHODS = tuple(name for name, s in SAMPLERS.items() if s.on_node)
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 DESCENT_HALF_WIDTH = 3.0  # descent line scans: +- this many std (a seed, not a Gibbs draw)
 DESCENT_CANDIDATES = 32  # segments per descent step judged against every observation
@@ -819,10 +846,10 @@ def sample_posterior(
     n_samples = int(n_samples)
     dropped = np.zeros(0, dtype=int)
     kept_idx = np.arange(len(history))
-    info: dict = {"chains": chains if method != "rejection" else 0}
+    info: dict = {"chains": chains if SAMPLERS[method].mcmc else 0}
     if len(history) == 0 or n_samples == 0:
         return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-    if method == "rejection":
+    if not SAMPLERS[method].mcmc:
         z, stats = _rejection(shape, history, n_samples, rng, max_draws, max(1024, 4 * n_samples))
         info.update(stats)
         return PosteriorSamples(
@@ -859,9 +886,7 @@ def sample_posterior(
     per_chain = -(-n_samples // chains)
     warm = init_z is not None and seeds.warm >= chains
     if burn_in is None:
-        burn_in = ({"hmc": 1, "gibbs": 1, "mh": 50} if warm else {"hmc": 3, "gibbs": 5, "mh": 200})[
-            method
-        ]
+        burn_in = SAMPLERS[method].burn_in[int(warm)]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
     runner = ChainRunner(seeds.system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
     run = _ChainRun(runner, shape, sub, per_chain, thin, burn_in, max_steps)
