@@ -9,6 +9,7 @@ from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
 
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.execution.types import Outcome, PlanCommand, PlaneFrame, Report
 from tactile_dock_ros.nodes import convert, validate
 from tactile_dock_ros.nodes.convert import MessageError
 
@@ -44,7 +45,7 @@ def _plan(**changes):
         episode=12,
     )
     fields.update(changes)
-    return convert.PlanCommand(**fields)
+    return PlanCommand(**fields)
 
 
 def test_shape_round_trip_is_exact():
@@ -153,7 +154,7 @@ def test_give_up_plan_needs_no_waypoints_but_decision_must_be_known():
 
 
 def test_report_round_trip_and_unknown_outcome():
-    report = convert.Report(
+    report = Report(
         5, ExecutionReport.CONTACT_FAILED, _history(), np.array([0.1, 0.2]), "x", episode=9
     )
     msg = convert.report_to_msg(report, HEADER)
@@ -166,16 +167,18 @@ def test_report_round_trip_and_unknown_outcome():
         convert.report_from_msg(msg)
 
 
-def test_status_constants_match_the_core():
-    assert [ContactSegment.FREE, ContactSegment.STICK, ContactSegment.SLIP_RIGHT] == [
-        Status.FREE,
-        Status.STICK,
-        Status.SLIP_RIGHT,
-    ]
+def test_message_constants_match_the_ros_free_types():
+    assert {s.name: s.value for s in Status} == _constants(ContactSegment)
+    assert {o.name: o.value for o in Outcome} == _constants(ExecutionReport)
+
+
+def _constants(msg_type) -> dict[str, int]:
+    """The integer constants a message type defines, by name."""
+    return {n: v for n, v in vars(msg_type).items() if n.isupper() and isinstance(v, int)}
 
 
 def _vertical_plane():
-    return convert.PlaneFrame(np.array([0.1, 0.6, -0.2]), np.eye(3)[0], np.eye(3)[2])
+    return PlaneFrame(np.array([0.1, 0.6, -0.2]), np.eye(3)[0], np.eye(3)[2])
 
 
 @settings(max_examples=50, deadline=None)
@@ -189,7 +192,7 @@ def test_plane_points_round_trip(xy):
 
 def test_plane_axes_must_be_orthonormal():
     with pytest.raises(ValueError, match="orthonormal"):
-        convert.PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))
+        PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))
 
 
 def test_pose_and_wrench_map_into_the_plane():

@@ -7,13 +7,14 @@ from node_helpers import launch_nodes, node_with_driver
 from ros_helpers import spin_until
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 
+from tactile_dock_ros.execution.types import PRODUCER_LOST, PlanCommand, Report
 from tactile_dock_ros.nodes import convert, qos
 
 pytestmark = pytest.mark.dds
 
 
 def _plan_msg(plan_id, waypoints):
-    command = convert.PlanCommand(
+    command = PlanCommand(
         plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), 3.0, 0.1, False,
         0.5, 0.5, 0, "",
     )  # fmt: skip
@@ -87,7 +88,7 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     [
         ("episode_ended", "episode 0 is ABORTED"),
         ("out_of_plane_force", "(3-D) above the limit"),  # 50 N along the plane normal
-        ("producer_lost", convert.PRODUCER_LOST),  # the planner stops resending the plan
+        ("producer_lost", PRODUCER_LOST),  # the planner stops resending the plan
     ],
 )
 def test_executor_stops_a_running_plan(stop, expected, tmp_path):
@@ -149,7 +150,7 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
         reports = driver.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
         assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
-        good = convert.Report(
+        good = Report(
             1, ExecutionReport.NO_CONTACT,
             convert.history_from_segments([]).extend([0.0, 0.5], [0.0, 0.2], [0]),
             np.array([0.0, 0.2]), "",

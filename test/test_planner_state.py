@@ -18,6 +18,7 @@ from ros_helpers import spin_until
 from std_msgs.msg import UInt32
 from tactile_dock_ros.msg import DockingPlan
 
+from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.nodes import convert, journal, qos
 
 pytestmark = pytest.mark.dds
@@ -25,7 +26,7 @@ EPISODE = 77
 
 
 def _journal(directory, age_s: float) -> DockingPlan:
-    command = convert.PlanCommand(
+    command = PlanCommand(
         1, True, np.array([[0.0, 0.3], [0.0, 0.1]]), np.array([0.0, -1.0]), 3.0, 0.1, False,
         0.4, 0.4, 2, "", np.array([0.0, 0.1]), EPISODE, 0,
     )  # fmt: skip

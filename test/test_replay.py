@@ -17,6 +17,7 @@ from tactile_dock_ros.msg import ExecutionReport
 from tactile_dock_ros.core import planner, problems, simulate
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import sample_posterior
+from tactile_dock_ros.execution.types import PlanCommand, Report
 from tactile_dock_ros.nodes import convert
 from tactile_dock_ros.tools import bag, replay
 
@@ -65,7 +66,7 @@ def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
             compliant=False,
         )
         dock = result.decision == "dock"
-        command = convert.PlanCommand(
+        command = PlanCommand(
             plan_id,
             dock,
             result.path if dock else start[None],
@@ -102,7 +103,7 @@ def _record_episode(rng, messages: list, t0: int, episode: int) -> None:
             if run.contact
             else ExecutionReport.NO_CONTACT
         )
-        report = convert.Report(plan_id, outcome, run.observations, run.stop_point, "", episode)
+        report = Report(plan_id, outcome, run.observations, run.stop_point, "", episode)
         put("/execution_report", convert.report_to_msg, report)
         history = history.extend(run.observations.a, run.observations.b, run.observations.status)
         targets.append(result.target_point)

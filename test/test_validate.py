@@ -93,7 +93,7 @@ def test_execution_report(data, outcome, plan_id):
                           stop_point=Point(x=data.draw(SMALL), y=data.draw(SMALL)))  # fmt: skip
     report = _convert(convert.report_from_msg, msg)
     if report is not None:
-        assert outcome in convert.OUTCOME_NAMES and np.all(np.isfinite(report.stop_point))
+        assert outcome in convert.OUTCOMES and np.all(np.isfinite(report.stop_point))
         assert all(s.plan_id == plan_id for s in msg.segments)
 
 

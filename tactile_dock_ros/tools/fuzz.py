@@ -41,6 +41,7 @@ from std_msgs.msg import Header, UInt32
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.history import History
+from tactile_dock_ros.execution.types import PlaneFrame
 from tactile_dock_ros.msg import ContactHistory, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import node_class
@@ -88,7 +89,7 @@ def bases(now_s: int, live: dict) -> dict:
     plane, base = _header(now_s, PLANE_FRAME), _header(now_s, BASE_FRAME)
     prior = problems.get(ARGUMENTS["problem"]).prior
     history = _seed_history()
-    frame = convert.PlaneFrame([0.0, 0.6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    frame = PlaneFrame([0.0, 0.6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
     camera = _header(now_s, "depth_camera")
     K = np.array([[30.0, 0.0, 15.5], [0.0, 30.0, 11.5], [0.0, 0.0, 1.0]])
     out = {

@@ -51,7 +51,7 @@ class Cycle:
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
     dropped: np.ndarray  # history rows inference ignored for them (dropped_segments)
     previous_targets: np.ndarray  # (k, 2) aim points of the episode's earlier DOCK plans
-    recorded: object  # nodes.convert.PlanCommand
+    recorded: object  # execution.types.PlanCommand
     outcome: str  # the executor's report for the plan ("-": none recorded)
 
     @property

@@ -14,8 +14,8 @@ settings and waits until the planner publishes its next plan. Measured per run:
   the restarted suite's history (bit-exact);
 * ``same_episode``: the next plan carries the episode id of before the kill;
 * planner only: ``stop_s``, from the kill to the executor's report that it stopped the arm
-  (``convert.PRODUCER_LOST``), and ``stopped``: every arm command from then until the restart
-  is zero;
+  (``execution.types.PRODUCER_LOST``), and ``stopped``: every arm command from then until the
+  restart is zero;
 * ``resume_s``: from the restart to the next plan (wall clock: startup, discovery, journal
   replay, sampling and planning on this machine).
 

@@ -32,6 +32,7 @@ from rclpy.node import Node
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 from std_srvs.srv import SetBool
 
+from tactile_dock_ros.execution.types import PlanCommand, PlaneFrame, Report
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import stamp_seconds
@@ -61,7 +62,7 @@ class Envelope:
     max_speed: float
     max_force: float
     force_bias: np.ndarray  # the mock's constant F/T bias, base frame (N)
-    plane: convert.PlaneFrame
+    plane: PlaneFrame
     control_period: float
     sensor_timeout: float
     filter_cutoff_hz: float  # the executor's F/T low-pass
@@ -83,9 +84,7 @@ class Envelope:
             float(executor["max_speed"]),
             float(executor["max_force"]),
             np.array(mock["force_bias"], float),
-            convert.PlaneFrame(
-                shared["plane_origin"], shared["plane_x_axis"], shared["plane_y_axis"]
-            ),
+            PlaneFrame(shared["plane_origin"], shared["plane_x_axis"], shared["plane_y_axis"]),
             1.0 / float(executor["control_rate_hz"]),
             float(executor["sensor_timeout"]),
             float(executor["filter_cutoff_hz"]),
@@ -99,7 +98,7 @@ class Recording:
     commands: list = field(default_factory=list)
     poses: list = field(default_factory=list)  # (stamp s, position (3,) m)
     wrenches: list = field(default_factory=list)  # (stamp s, force (3,) N)
-    reports: list = field(default_factory=list)  # convert.Report
+    reports: list = field(default_factory=list)  # execution.types.Report
     diagnostics: list = field(default_factory=list)  # (receive monotonic s, {key: value}, status)
 
 
@@ -220,7 +219,7 @@ class Probe(Node):
     def plan(self, waypoints, speed=0.2, threshold=3.0, episode=None) -> int:
         """Publish a DOCK plan (load straight down, along its last move); returns its id."""
         plan_id, self.next_id = self.next_id, self.next_id + 1
-        command = convert.PlanCommand(
+        command = PlanCommand(
             plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed,
             False, 0.5, 0.5, 0, "safety probe",
             episode=self.episode if episode is None else episode,
@@ -241,7 +240,7 @@ class Probe(Node):
         """Until the executor's diagnostics report ``expected`` as its episode."""
         return self.spin_until(lambda: self.diagnostics().get("episode") == expected, timeout_s)
 
-    def report(self, plan_id: int, timeout_s: float = 30.0) -> convert.Report | None:
+    def report(self, plan_id: int, timeout_s: float = 30.0) -> Report | None:
         def found() -> list:
             return [r for r in self.rec.reports if r.plan_id == plan_id]
 
