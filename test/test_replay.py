@@ -130,7 +130,7 @@ def test_every_episode_message_survives_a_bag_round_trip(tmp_path, storage):
         for i, (topic, kind) in enumerate(bag.EPISODE_TOPICS.items())
         if kind.rsplit("/", 1)[-1] in samples
     ]
-    assert len(written) == len(topics) - 1  # all but diagnostic_msgs/DiagnosticStatus
+    assert len(written) == len(topics)
     bag.write(tmp_path / "b", written, storage=storage)
     assert list(bag.read(tmp_path / "b")) == written
     files = [p.suffix for p in (tmp_path / "b").iterdir() if p.name != "metadata.yaml"]

@@ -42,6 +42,8 @@ from tactile_dock_ros.msg import (
     ContactHistory,
     ContactSegment,
     DockingPlan,
+    EpisodeCycle,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -345,13 +347,71 @@ def episode_from_msg(msg) -> int:
     return int(msg.data)
 
 
-def episode_status_from_msg(msg) -> tuple[str, int]:
-    """The planner's episode_status (DiagnosticStatus) -> (state, episode id); the state is the
-    message up to the first ':', the id the ``episode`` value (0 when absent)."""
-    value = next((kv.value for kv in msg.values if kv.key == "episode"), "0")
-    if not value.isdecimal() or int(value) >= 2**32:
-        raise MessageError(f"episode_status episode {value!r} is not a uint32")
-    return msg.message.split(":")[0], int(value)
+# EpisodeStatus.state constants by name (the planner's states); a cycle's outcome is an Outcome
+# name, INTERRUPTED (the executor stopped it because the planner fell silent) or '' (no report).
+EPISODE_STATES = ("IDLE", "RUNNING", "DOCKED", "GAVE_UP", "ABORTED")
+INTERRUPTED = "INTERRUPTED"
+_STATE_NAMES = {getattr(EpisodeStatus, name): name for name in EPISODE_STATES}
+_CYCLE_OUTCOMES = {
+    "": EpisodeCycle.PENDING,
+    INTERRUPTED: EpisodeCycle.INTERRUPTED,
+    **{outcome.name: outcome.value for outcome in Outcome},
+}
+_CYCLE_OUTCOME_NAMES = {code: name for name, code in _CYCLE_OUTCOMES.items()}
+
+
+def episode_status_to_msg(
+    header: Header, state: str, episode: int, detail: str, prior_vertices: int, cycles
+) -> EpisodeStatus:
+    """The planner's episode status; ``state`` one of EPISODE_STATES, ``cycles`` its records in
+    order (dicts: p_dock, inference_s, planning_s and, once reported, execution_s and outcome)."""
+    return EpisodeStatus(
+        header=header,
+        episode=int(episode),
+        state=getattr(EpisodeStatus, state),
+        detail=detail,
+        prior_vertices=int(prior_vertices),
+        cycles=[
+            EpisodeCycle(
+                docking_probability=float(c["p_dock"]),
+                inference_time=float(c["inference_s"]),
+                planning_time=float(c["planning_s"]),
+                execution_time=float(c.get("execution_s", 0.0)),
+                outcome=_CYCLE_OUTCOMES[c.get("outcome", "")],
+            )
+            for c in cycles
+        ],
+    )
+
+
+def episode_status_from_msg(msg: EpisodeStatus) -> tuple[str, int]:
+    """EpisodeStatus -> (state, one of EPISODE_STATES; episode id)."""
+    if msg.state not in _STATE_NAMES:
+        raise MessageError(f"unknown episode state {msg.state}")
+    return _STATE_NAMES[msg.state], int(msg.episode)
+
+
+def episode_cycles_from_msg(msg: EpisodeStatus) -> list[dict]:
+    """EpisodeStatus.cycles -> the records ``episode_status_to_msg`` took (execution_s None and
+    outcome '' while a cycle has no report)."""
+    validate.bounded("cycles count", len(msg.cycles), validate.MAX_CYCLES)
+    records = []
+    for c in msg.cycles:
+        if c.outcome not in _CYCLE_OUTCOME_NAMES:
+            raise MessageError(f"unknown cycle outcome {c.outcome}")
+        values = finite("cycle", [c.docking_probability, c.inference_time, c.planning_time,
+                                  c.execution_time])  # fmt: skip
+        outcome = _CYCLE_OUTCOME_NAMES[c.outcome]
+        records.append(
+            {
+                "p_dock": values[0],
+                "inference_s": values[1],
+                "planning_s": values[2],
+                "execution_s": values[3] if outcome else None,
+                "outcome": outcome,
+            }
+        )
+    return records
 
 
 # --------------------------------------------------------------------------- depth camera

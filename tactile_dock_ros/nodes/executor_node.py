@@ -2,8 +2,8 @@
 
 Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wrench``
 (WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
-planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped); the
-planner resends the plan being executed every 0.5 s: when no copy arrived for
+planner's ``episode_status`` (EpisodeStatus: a plan of an episode that ended or was superseded
+is stopped); the planner resends the plan being executed every 0.5 s: when no copy arrived for
 ``producer_timeout`` the planner is gone (crashed, killed) and the arm is stopped (ABORTED,
 detail ``execution.types.PRODUCER_LOST``; a restarted planner replans);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
@@ -19,14 +19,14 @@ is not evidence (a stale sensor or a stopped plan may have misread it).
 from __future__ import annotations
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
 from tactile_dock_ros.execution.types import PRODUCER_LOST, Outcome, Report
-from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos, validate
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
@@ -136,7 +136,7 @@ class ExecutorNode(Node):
         subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id)
         subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id)
         subscribe(self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id)
-        subscribe(self, DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED)
+        subscribe(self, EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED)
         self.create_timer(self.dt, self.on_tick)
         self.create_timer(self.p.diagnostics_period, self.publish_diagnostics)
 
@@ -209,7 +209,7 @@ class ExecutorNode(Node):
             )
         self.last_plan = (plan.episode, plan.plan_id)
 
-    def on_episode_status(self, msg: DiagnosticStatus) -> None:
+    def on_episode_status(self, msg: EpisodeStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state, episode = convert.episode_status_from_msg(msg)
         self.gate.update(episode, state)

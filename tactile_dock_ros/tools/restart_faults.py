@@ -103,7 +103,7 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
             ended = episode.FINAL_STATES
             wait("the second plan", lambda: len(record.plans) >= 2 or record.state in ended)
             if len(record.plans) < 2:  # e.g. a sensor timeout on a starved machine
-                why = record.status.message if record.status else "no status"
+                why = f"{record.state} {record.detail}"
                 raise RuntimeError(f"the episode ended before the fault: {why} (logs: {log_dir})")
             episode_id, killed_during = record.plans[-1].episode, record.plans[-1].plan_id
             t_plan = now()

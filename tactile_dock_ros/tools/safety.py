@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -33,7 +33,7 @@ from rclpy.subscription_content_filter_options import ContentFilterOptions
 from std_srvs.srv import SetBool
 
 from tactile_dock_ros.execution.types import PlanCommand, PlaneFrame, Report
-from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import stamp_seconds
 from tactile_dock_ros.nodes.planner_node import RESEND_PERIOD
@@ -111,7 +111,7 @@ class Probe(Node):
         self.episode = 0
         self.next_id = 1
         self.plan_pub = self.create_publisher(DockingPlan, "/plan", qos.EVENTS)
-        self.status_pub = self.create_publisher(DiagnosticStatus, "/episode_status", qos.LATCHED)
+        self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", qos.LATCHED)
         self.create_subscription(TwistStamped, COMMAND, self.on_command, qos.COMMAND)
         self.create_subscription(ExecutionReport, "/execution_report", self.on_report, qos.EVENTS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, qos.EVENTS)
@@ -232,8 +232,8 @@ class Probe(Node):
         return plan_id
 
     def status(self, episode: int, state: str) -> None:
-        values = [KeyValue(key="episode", value=str(episode))]
-        self.status_pub.publish(DiagnosticStatus(message=state, values=values))
+        header = convert.Header(stamp=self.get_clock().now().to_msg())
+        self.status_pub.publish(convert.episode_status_to_msg(header, state, episode, "", 0, []))
         self.episode = episode
 
     def wait_episode(self, expected: str, timeout_s: float = 10.0) -> bool:
@@ -375,7 +375,7 @@ def _superseded(probe: Probe, start) -> int:
 
 def _ended(probe: Probe, start) -> int:
     _set_episode(probe, 9, "RUNNING")
-    _set_episode(probe, 9, "ABORTED: test")
+    _set_episode(probe, 9, "ABORTED")
     return probe.plan([start, [0.0, -0.1]])
 
 
