@@ -219,6 +219,30 @@ def test_ros_free_layers_load_without_ros():
     assert [m for m in loaded if m.split(".")[0] in ros or m.startswith(above)] == []
 
 
+def _imports(path: Path, package: str) -> set[str]:
+    """Absolute names of the modules the file ``path`` of ``package`` imports."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            names.add(".".join(filter(None, [base, node.module])))
+    return names
+
+
+def test_nodes_never_import_the_tools():
+    """Layers import downward only: tools -> nodes -> execution, perception -> core."""
+    nodes = REPO_ROOT / "tactile_dock_ros" / "nodes"
+    upward = {
+        (path.name, module)
+        for path in nodes.glob("*.py")
+        for module in _imports(path, "tactile_dock_ros.nodes")
+        if module.startswith("tactile_dock_ros.tools")
+    }
+    assert upward == set()
+
+
 def test_jazzy_and_kilted_pin_the_same_non_ros_packages():
     """`make test ROS_DISTRO=jazzy` differs from the default only in its ROS wheels."""
     kilted, jazzy = _pins("requirements.txt"), _pins("requirements-jazzy.txt")

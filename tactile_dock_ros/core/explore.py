@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import planner, sampling, simulate, slides
+from . import geometry2d, planner, sampling, simulate, slides
 from .history import History, Status
 from .shape import GaussianShape
 
@@ -201,7 +201,7 @@ def slide_evidence(
     v = np.asarray(ground_truth, float)
     edges, left, right = simulate.edge_index_arrays(len(v), closed)
     contact = 0.5 * (obs.a[-1] + obs.b[-1])
-    push = simulate.unit(load, "load")
+    push = geometry2d.unit(load, "load")
     half = 0.5 * contact_resolution * push
     hit, edge, _, _ = simulate.first_hits(
         v[None, edges[:, 0]], v[None, edges[:, 1]], contact - half, contact + half

@@ -48,6 +48,7 @@ from enum import Enum
 import numpy as np
 
 from tactile_dock_ros.core import slides
+from tactile_dock_ros.core.geometry2d import cross, perp
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.execution.types import Outcome, PlanCommand
 
@@ -255,8 +256,7 @@ class GuardedRun:
         d = self._direction()
         moved = tool - self._anchor
         if np.linalg.norm(moved) > self.settings.slip_tolerance:
-            cross = d[0] * moved[1] - d[1] * moved[0]
-            status = Status.SLIP_LEFT if cross > 0 else Status.SLIP_RIGHT
+            status = Status.SLIP_LEFT if cross(d, moved) > 0 else Status.SLIP_RIGHT
             if self.plan.compliant:
                 self._phase, self._slip, self._still = _Phase.SLIDE, status, (tool.copy(), self._t)
                 return self._step_slide(tool, force)
@@ -274,7 +274,7 @@ class GuardedRun:
         how = f"slid {slid:.3f} m {self._slip.name.lower().replace('slip_', '')}"
         rest, since = self._still
         moved = tool - rest
-        across = abs(d[0] * moved[1] - d[1] * moved[0])
+        across = abs(cross(d, moved))
         # Moving straight along the load, little of the force resisting it: free space, or a
         # surface parallel to the load (a wall the arm's lateral spring presses against).
         free = (
@@ -286,7 +286,7 @@ class GuardedRun:
             self._record_contact(self._anchor, d, self._slip)
             if free:  # the trace up to the rest point ended at the vertex it slid off
                 trace = np.array([self._anchor, *self._trace, rest])
-                left = np.array([-d[1], d[0]])  # the side a SLIP_LEFT slide moves to
+                left = perp(d)  # the side a SLIP_LEFT slide moves to
                 side = left if self._slip == Status.SLIP_LEFT else -left
                 w = self.settings.contact_resolution
                 pieces = crossed_pieces(trace, w, side)
