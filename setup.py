@@ -2,9 +2,9 @@
 
 The ROS 2 package itself is built by CMakeLists.txt (colcon / ament_cmake): that build generates
 the messages and installs everything, nodes included. This file serves users who want the method
-(core, perception) and its ROS-free tools (bench sampling / probsim / docking / perception, plot,
-calibrate) in a plain Python environment, e.g. for offline analysis. The ROS tools in the same
-folder (demo, episode, bag, replay, bench episode) need a ROS 2 environment.
+(core, perception, execution) and its ROS-free tools (bench sampling / probsim / docking /
+perception, plot, calibrate) in a plain Python environment, e.g. for offline analysis. The ROS
+tools in the same folder (demo, episode, bag, replay, bench episode) need a ROS 2 environment.
 """
 
 from setuptools import setup
@@ -18,6 +18,7 @@ setup(
     packages=[
         "tactile_dock_ros",
         "tactile_dock_ros.core",
+        "tactile_dock_ros.execution",
         "tactile_dock_ros.perception",
         "tactile_dock_ros.tools",
     ],

@@ -7,6 +7,8 @@ from tactile_dock_ros.msg import (
     ContactHistory,
     ContactSegment,
     DockingPlan,
+    EpisodeCycle,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -37,6 +39,12 @@ def build() -> dict:
         ContactSegment.SLIP_RIGHT,
     ]
     segments = [_segment(i, s) for i, s in enumerate(statuses)]
+    cycles = [
+        EpisodeCycle(docking_probability=0.5, inference_time=1.25, planning_time=0.5,
+                     execution_time=3.5, outcome=EpisodeCycle.INTERRUPTED),
+        EpisodeCycle(docking_probability=0.25, inference_time=0.75, planning_time=0.25,
+                     execution_time=2.5, outcome=ExecutionReport.NO_CONTACT),
+    ]  # fmt: skip
     return {
         "ShapeDistribution": ShapeDistribution(
             header=_header(1),
@@ -85,5 +93,14 @@ def build() -> dict:
             segments=segments[:2],
             stop_point=Point(x=0.3, y=-0.4, z=0.0),
             detail="slipped right under the load",
+        ),
+        "EpisodeCycle": cycles[1],
+        "EpisodeStatus": EpisodeStatus(
+            header=_header(6),
+            episode=1795315710,
+            state=EpisodeStatus.GAVE_UP,
+            detail="cycle budget of 2 spent",
+            prior_vertices=12,
+            cycles=cycles,
         ),
     }

@@ -1,28 +1,26 @@
 """bench episode's bookkeeping: how an episode ended, per-problem counts, bad arguments."""
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticStatus
+from std_msgs.msg import Header
 
+from tactile_dock_ros.nodes import convert
 from tactile_dock_ros.tools import bench, bench_episode
 from tactile_dock_ros.tools.episode import EpisodeRecord
 
 
-def _record(message: str) -> EpisodeRecord:
-    return EpisodeRecord(status=DiagnosticStatus(message=message))
-
-
 @pytest.mark.parametrize(
-    ("message", "expected"),
+    ("state", "detail", "expected"),
     [
-        ("DOCKED: docked", "docked"),
-        ("GAVE_UP: best docking probability 2.00e-04 < threshold 0.001", "planner"),
-        ("GAVE_UP: cycle budget of 8 spent", "budget"),
-        ("GAVE_UP: inference found no shape consistent with the contact history", "no_shape"),
-        ("ABORTED: sensor timeout", "aborted"),
+        ("DOCKED", "docked", "docked"),
+        ("GAVE_UP", "best docking probability 2.00e-04 < threshold 0.001", "planner"),
+        ("GAVE_UP", "cycle budget of 8 spent", "budget"),
+        ("GAVE_UP", "inference found no shape consistent with the contact history", "no_shape"),
+        ("ABORTED", "sensor timeout", "aborted"),
     ],
 )
-def test_ended_by(message, expected):
-    assert bench_episode.ended_by(_record(message)) == expected
+def test_ended_by(state, detail, expected):
+    status = convert.episode_status_to_msg(Header(), state, 7, detail, 12, [])
+    assert bench_episode.ended_by(EpisodeRecord(status=status)) == expected
     assert bench_episode.ended_by(EpisodeRecord()) == "none"
 
 

@@ -5,11 +5,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from std_msgs.msg import Header
-from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
+from tactile_dock_ros.msg import (
+    ContactSegment,
+    DockingPlan,
+    EpisodeCycle,
+    EpisodeStatus,
+    ExecutionReport,
+)
 
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.execution.types import Outcome, PlanCommand, PlaneFrame, Report
 from tactile_dock_ros.nodes import convert, validate
 from tactile_dock_ros.nodes.convert import MessageError
 
@@ -45,7 +52,7 @@ def _plan(**changes):
         episode=12,
     )
     fields.update(changes)
-    return convert.PlanCommand(**fields)
+    return PlanCommand(**fields)
 
 
 def test_shape_round_trip_is_exact():
@@ -158,7 +165,7 @@ def test_give_up_plan_needs_no_waypoints_but_decision_must_be_known():
 
 
 def test_report_round_trip_and_unknown_outcome():
-    report = convert.Report(
+    report = Report(
         5, ExecutionReport.CONTACT_FAILED, _history(), np.array([0.1, 0.2]), "x", episode=9
     )
     msg = convert.report_to_msg(report, HEADER)
@@ -171,16 +178,44 @@ def test_report_round_trip_and_unknown_outcome():
         convert.report_from_msg(msg)
 
 
-def test_status_constants_match_the_core():
-    assert [ContactSegment.FREE, ContactSegment.STICK, ContactSegment.SLIP_RIGHT] == [
-        Status.FREE,
-        Status.STICK,
-        Status.SLIP_RIGHT,
-    ]
+def test_message_constants_match_the_ros_free_types():
+    assert {s.name: s.value for s in Status} == _constants(ContactSegment)
+    assert {o.name: o.value for o in Outcome} == _constants(ExecutionReport)
+    assert dict(zip(convert.EPISODE_STATES, range(5), strict=True)) == _constants(EpisodeStatus)
+    assert not {o.value for o in Outcome} & set(_constants(EpisodeCycle).values())
+
+
+def _constants(msg_type) -> dict[str, int]:
+    """The integer constants a message type defines, by name."""
+    return {n: v for n, v in vars(msg_type).items() if n.isupper() and isinstance(v, int)}
+
+
+def test_episode_status_round_trip_and_unknown_state():
+    cycles = [
+        {"p_dock": 0.5, "inference_s": 1.5, "planning_s": 0.25, "execution_s": 3.0,
+         "outcome": "CONTACT_FAILED", "plan_stamp": 12.0},
+        {"p_dock": 0.75, "inference_s": 1.0, "planning_s": 0.5, "execution_s": 2.0,
+         "outcome": convert.INTERRUPTED},
+        {"p_dock": 0.25, "inference_s": 0.5, "planning_s": 0.125, "outcome": ""},  # executing
+    ]  # fmt: skip
+    msg = convert.episode_status_to_msg(HEADER, "RUNNING", 7, "resumed", 12, cycles)
+    assert (msg.state, msg.detail, msg.prior_vertices) == (EpisodeStatus.RUNNING, "resumed", 12)
+    assert [c.outcome for c in msg.cycles] == [1, EpisodeCycle.INTERRUPTED, EpisodeCycle.PENDING]
+    assert convert.episode_status_from_msg(msg) == ("RUNNING", 7)
+    back = convert.episode_cycles_from_msg(msg)
+    keys = ("p_dock", "inference_s", "planning_s", "execution_s", "outcome")
+    assert back[:2] == [{k: c[k] for k in keys} for c in cycles[:2]]
+    assert back[2] == {k: cycles[2].get(k) for k in keys}  # execution_s None: no report yet
+    msg.state = 9
+    with pytest.raises(MessageError, match="unknown episode state"):
+        convert.episode_status_from_msg(msg)
+    msg.cycles[0].outcome = 7
+    with pytest.raises(MessageError, match="unknown cycle outcome"):
+        convert.episode_cycles_from_msg(msg)
 
 
 def _vertical_plane():
-    return convert.PlaneFrame(np.array([0.1, 0.6, -0.2]), np.eye(3)[0], np.eye(3)[2])
+    return PlaneFrame(np.array([0.1, 0.6, -0.2]), np.eye(3)[0], np.eye(3)[2])
 
 
 @settings(max_examples=50, deadline=None)
@@ -194,7 +229,7 @@ def test_plane_points_round_trip(xy):
 
 def test_plane_axes_must_be_orthonormal():
     with pytest.raises(ValueError, match="orthonormal"):
-        convert.PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))
+        PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))
 
 
 def test_pose_and_wrench_map_into_the_plane():

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_dock_ros.core.history import Status
-from tactile_dock_ros.nodes.convert import PlanCommand
-from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
-from tactile_dock_ros.nodes.mock_physics import PointToolSim
+from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
+from tactile_dock_ros.execution.mock_physics import PointToolSim
+from tactile_dock_ros.execution.types import Outcome, PlanCommand
 
 FLOOR = np.array([[1.0, 0.0], [-1.0, 0.0]])  # y = 0, solid below (right to left)
 SLOPE_DOWN_RIGHT = np.array([[1.0, -1.0], [-1.0, 1.0]])  # 45 degrees, too steep for mu = 0.5
@@ -115,7 +115,7 @@ def test_compliant_slide_reports_every_edge_it_crossed_before_falling_off():
 
 
 def test_crossed_pieces_are_the_edges_between_the_trace_corners():
-    from tactile_dock_ros.nodes.guarded import crossed_pieces
+    from tactile_dock_ros.execution.guarded import crossed_pieces
 
     corner = np.array([[0.0, 0.0], [0.1, -0.1], [0.2, -0.3], [0.25, -0.3]])
     dense = np.vstack(
@@ -123,14 +123,14 @@ def test_crossed_pieces_are_the_edges_between_the_trace_corners():
     )
     trace = np.vstack([dense, corner[-1:]])
     right = np.array([1.0, 0.0])  # a slide down to the right pushed along -y: SLIP_LEFT
-    middles = crossed_pieces(trace, 0.01, right)
-    np.testing.assert_allclose(middles, [[0.15, -0.2], [0.225, -0.3]], atol=1e-9)
-    assert len(crossed_pieces(np.linspace([0, 0], [0.1, -0.1], 30), 0.01, right)) == 0  # 1 piece
-    assert len(crossed_pieces(trace, 0.06, right)) == 1  # the 5 cm last piece is below resolution
+    pieces = np.array(crossed_pieces(trace, 0.01, right))
+    np.testing.assert_allclose(pieces, [corner[1:3], corner[2:]], atol=1e-9)
+    assert len(crossed_pieces(np.linspace([0, 0], [0.1, -0.1], 30), 0.01, right)[0]) == 0  # 1 piece
+    assert len(crossed_pieces(trace, 0.06, right)[0]) == 1  # the 5 cm last piece is too short
     # past the lip the arm's lateral spring pulls the tool back down an undercut: not a slide
     undercut = np.vstack([trace, np.linspace([0.25, -0.3], [0.2, -0.4], 20)[1:]])
-    np.testing.assert_allclose(crossed_pieces(undercut, 0.01, right), middles, atol=1e-9)
-    assert len(crossed_pieces(trace, 0.01, -right)) == 0  # none of it slid the other way
+    np.testing.assert_allclose(crossed_pieces(undercut, 0.01, right), pieces, atol=1e-9)
+    assert len(crossed_pieces(trace, 0.01, -right)[0]) == 0  # none of it slid the other way
 
 
 def test_compliant_plan_sticks_at_once_on_a_floor_and_bounds_long_slides():

@@ -11,6 +11,7 @@ from ros_helpers import ros_node, spin_until
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport, ShapeDistribution
 
 from tactile_dock_ros.core.history import Status
+from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.tools import bringup
 
@@ -20,7 +21,7 @@ FLOOR = {"vertices": [[0.6, 0.0], [-0.6, 0.0]], "start": [0.0, 0.3], "friction":
 
 
 def _plan(plan_id, waypoints, speed=0.2):
-    command = convert.PlanCommand(
+    command = PlanCommand(
         plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), 3.0, speed, False,
         0.5, 0.5, 0, "test",
     )  # fmt: skip

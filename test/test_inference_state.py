@@ -17,6 +17,7 @@ from std_msgs.msg import UInt32
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeSamples
 
 from tactile_dock_ros.core import problems
+from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.nodes import convert, inference_node, qos
 
 pytestmark = pytest.mark.dds
@@ -27,7 +28,7 @@ def _report(plan_id: int, rows: int) -> ExecutionReport:
     rng = np.random.default_rng(plan_id)
     a = rng.uniform(-0.2, 0.2, size=(rows, 2))
     history = convert.history_from_segments([]).extend(a, a + np.array([0.0, -0.05]), [0] * rows)
-    report = convert.Report(plan_id, ExecutionReport.NO_CONTACT, history, a[-1], "", EPISODE)
+    report = Report(plan_id, ExecutionReport.NO_CONTACT, history, a[-1], "", EPISODE)
     return convert.report_to_msg(report, convert.Header(frame_id="dock_plane"))
 
 

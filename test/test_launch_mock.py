@@ -48,7 +48,7 @@ class TestMockEpisode(unittest.TestCase):
             executor.add_node(client)
             record = client.run(executor, timeout_s=240.0)
             self.assertIn(record.state, FINAL_STATES)
-            self.assertEqual(record.state, "DOCKED", record.status.message)
+            self.assertEqual(record.state, "DOCKED", record.detail)
         finally:
             client.destroy_node()
             rclpy.shutdown()

@@ -4,9 +4,8 @@ import numpy as np
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker
 
-from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.history import STATUS_RGBA, History, Status
 from tactile_dock_ros.nodes import markers
-from tactile_dock_ros.tools.figures import STATUS_RGBA
 
 
 def test_samples_and_history_markers():

@@ -7,15 +7,16 @@ import pytest
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from node_helpers import launch_nodes, node_with_driver
 from ros_helpers import spin_until
-from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 
+from tactile_dock_ros.execution.types import PRODUCER_LOST, PlanCommand, Report
 from tactile_dock_ros.nodes import convert, qos
 
 pytestmark = pytest.mark.dds
 
 
 def _plan_msg(plan_id, waypoints):
-    command = convert.PlanCommand(
+    command = PlanCommand(
         plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), 3.0, 0.1, False,
         0.5, 0.5, 0, "",
     )  # fmt: skip
@@ -89,12 +90,10 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     [
         ("episode_ended", "episode 0 is ABORTED"),
         ("out_of_plane_force", "(3-D) above the limit"),  # 50 N along the plane normal
-        ("producer_lost", convert.PRODUCER_LOST),  # the planner stops resending the plan
+        ("producer_lost", PRODUCER_LOST),  # the planner stops resending the plan
     ],
 )
 def test_executor_stops_a_running_plan(stop, expected, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-
     spec = launch_nodes("mock")["executor"]
     reports, commands, normal_force, resend = [], [], [0.0], [True]
     timeout = ["-p", "executor:producer_timeout:=1.5"]
@@ -102,7 +101,7 @@ def test_executor_stops_a_running_plan(stop, expected, tmp_path):
         plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
         poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
         wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
-        statuses = driver.create_publisher(DiagnosticStatus, "episode_status", qos.LATCHED)
+        statuses = driver.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
         driver.create_subscription(ExecutionReport, "execution_report", reports.append, qos.EVENTS)
         driver.create_subscription(TwistStamped, "/arm/cmd_twist", commands.append, qos.COMMAND)
         publishers = (plans, poses, wrenches, statuses)
@@ -121,11 +120,11 @@ def test_executor_stops_a_running_plan(stop, expected, tmp_path):
 
         plans.publish(plan)
         assert spin_until(executor, lambda: feed() and not _zero(commands[-1]), 10.0)
-        status = DiagnosticStatus(message="RUNNING", values=[KeyValue(key="episode", value="0")])
+        status = EpisodeStatus(episode=0, state=EpisodeStatus.RUNNING)
         statuses.publish(status)
         assert not spin_until(executor, lambda: feed() and reports, 0.5)  # its episode runs on
         if stop == "episode_ended":
-            status.message = "ABORTED: no posterior samples within 60 s"
+            status.state, status.detail = EpisodeStatus.ABORTED, "no samples within 60 s"
             statuses.publish(status)
         elif stop == "producer_lost":
             resend[0] = False
@@ -151,7 +150,7 @@ def test_inference_drops_malformed_reports_and_keeps_its_history(tmp_path):
         reports = driver.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         driver.create_subscription(ContactHistory, "contact_history", histories.append, qos.LATCHED)
         assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
-        good = convert.Report(
+        good = Report(
             1, ExecutionReport.NO_CONTACT,
             convert.history_from_segments([]).extend([0.0, 0.5], [0.0, 0.2], [0]),
             np.array([0.0, 0.2]), "",
@@ -204,7 +203,6 @@ def test_planner_drops_malformed_samples_history_and_prior(tmp_path):
 
 
 def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_path):
-    from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
     from tactile_dock_ros.msg import ShapeDistribution
 
@@ -215,7 +213,7 @@ def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_pa
     with node_with_driver(spec, tmp_path, ["-p", "planner:stage_timeout:=1.0"]) as (
         node, driver, executor,
     ):  # fmt: skip
-        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
         prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         start = driver.create_client(Trigger, "start_episode")
         assert spin_until(executor, start.service_is_ready, 10.0)
@@ -229,13 +227,12 @@ def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_pa
         again = start.call_async(Trigger.Request())
         assert spin_until(executor, again.done, 10.0) and not again.result().success  # running
         assert spin_until(
-            executor, lambda: statuses and statuses[-1].message.startswith("ABORTED"), 10.0
+            executor, lambda: statuses and statuses[-1].state == EpisodeStatus.ABORTED, 10.0
         )
-    assert "posterior samples" in statuses[-1].message
+    assert "posterior samples" in statuses[-1].detail
 
 
 def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
-    from diagnostic_msgs.msg import DiagnosticStatus
     from std_srvs.srv import Trigger
     from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
 
@@ -245,7 +242,7 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
     spec = launch_nodes("mock")["planner"]
     statuses, plans = [], []
     with node_with_driver(spec, tmp_path) as (node, driver, executor):
-        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
         driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
         prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
@@ -271,9 +268,9 @@ def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
         empty = np.zeros((0, shape.n_vertices, 2))
         samples.publish(convert.samples_to_msg(empty, stamp, "hmc", 0.0, 0))
         assert spin_until(
-            executor, lambda: statuses and statuses[-1].message.startswith("GAVE_UP"), 10.0
+            executor, lambda: statuses and statuses[-1].state == EpisodeStatus.GAVE_UP, 10.0
         )
-    assert "no shape consistent" in statuses[-1].message and not plans
+    assert "no shape consistent" in statuses[-1].detail and not plans
 
 
 def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):

@@ -98,8 +98,8 @@ def test_executor_defaults_are_the_guarded_settings_defaults():
     """One source: a node started without a config file executes like guarded.Settings()."""
     from dataclasses import fields
 
+    from tactile_dock_ros.execution.guarded import Settings
     from tactile_dock_ros.nodes.executor_node import PARAMS
-    from tactile_dock_ros.nodes.guarded import Settings
 
     node_defaults = {p.name: p.default for p in PARAMS}
     shared = [f.name for f in fields(Settings) if f.name in node_defaults]

@@ -82,6 +82,8 @@ ROS_KEYS = {
 # and the linter test_ruff_passes_on_the_whole_tree runs. ROS wheels (ros-*) count as used: the
 # message build and rclpy need them without importing them by name.
 TOOLS = {"pytest-timeout", "ruff"}
+# The layers that run without ROS (setup.py's library): no rclpy, no messages, no nodes.
+ROS_FREE = ("core", "perception", "execution")
 LOCAL = {"tactile_dock_ros"} | {p.stem for p in (REPO_ROOT / "test").glob("*.py")}
 IMPORT_TREES = {"exec_depends": "tactile_dock_ros", "test_depends": "test"}
 
@@ -167,17 +169,78 @@ def test_pip_only_imports_are_exactly_requirements_pip():
     assert PIP_ONLY.keys() <= imported, "stale PIP_ONLY"
 
 
-def test_setup_py_requires_only_imported_distributions():
+def _setup_args() -> dict:
     setup = next(
         node
         for node in ast.walk(ast.parse((REPO_ROOT / "setup.py").read_text()))
         if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "setup"
     )
-    args = {k.arg: ast.literal_eval(k.value) for k in setup.keywords}
+    return {k.arg: ast.literal_eval(k.value) for k in setup.keywords}
+
+
+def test_setup_py_requires_only_imported_distributions():
+    args = _setup_args()
     extras = [r for reqs in args["extras_require"].values() for r in reqs]
     declared = {canonicalize_name(Requirement(r).name) for r in args["install_requires"] + extras}
     unused = declared - _imported_distributions("tactile_dock_ros")
     assert not unused, f"setup.py requires distributions nothing imports: {unused}"
+
+
+def test_setup_py_installs_every_subpackage_but_the_nodes():
+    """`pip install .` gives the ROS-free layers and the tools; the rclpy nodes need the ROS
+    build (CMakeLists.txt installs the whole tree)."""
+    root = REPO_ROOT / "tactile_dock_ros"
+    subpackages = {p.parent.name for p in root.glob("*/__init__.py")} - {"nodes"}
+    expected = {"tactile_dock_ros", *(f"tactile_dock_ros.{name}" for name in subpackages)}
+    assert set(_setup_args()["packages"]) == expected
+    assert {f"tactile_dock_ros.{layer}" for layer in ROS_FREE} <= expected
+
+
+def test_ros_free_layers_load_without_ros():
+    """core/, perception/ and execution/ import neither rclpy, nor a message package, nor the
+    layers above them (nodes, tools), directly or through each other: every module is imported
+    in a fresh interpreter and the modules it loaded are checked."""
+    probe = (
+        "import importlib, pkgutil, sys\n"
+        f"for layer in {ROS_FREE!r}:\n"
+        "    package = importlib.import_module('tactile_dock_ros.' + layer)\n"
+        "    for info in pkgutil.iter_modules(package.__path__, package.__name__ + '.'):\n"
+        "        importlib.import_module(info.name)\n"
+        "print(' '.join(sys.modules))\n"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", probe], cwd=REPO_ROOT, capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    ros = {name for name, key in ROSDEP_KEYS.items() if not key.startswith("python3-")}
+    above = ("tactile_dock_ros.msg", "tactile_dock_ros.nodes", "tactile_dock_ros.tools")
+    loaded = run.stdout.split()
+    assert "tactile_dock_ros.execution.guarded" in loaded
+    assert [m for m in loaded if m.split(".")[0] in ros or m.startswith(above)] == []
+
+
+def _imports(path: Path, package: str) -> set[str]:
+    """Absolute names of the modules the file ``path`` of ``package`` imports."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            names.add(".".join(filter(None, [base, node.module])))
+    return names
+
+
+def test_nodes_never_import_the_tools():
+    """Layers import downward only: tools -> nodes -> execution, perception -> core."""
+    nodes = REPO_ROOT / "tactile_dock_ros" / "nodes"
+    upward = {
+        (path.name, module)
+        for path in nodes.glob("*.py")
+        for module in _imports(path, "tactile_dock_ros.nodes")
+        if module.startswith("tactile_dock_ros.tools")
+    }
+    assert upward == set()
 
 
 def test_jazzy_and_kilted_pin_the_same_non_ros_packages():

@@ -6,10 +6,10 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tactile_dock_ros.core.geometry2d import cross
 from tactile_dock_ros.perception import evaluation, scenes
 from tactile_dock_ros.perception.config import Extrinsic, PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.geometry import (
-    cross2,
     perturb_pose,
     point_segment_distances,
 )
@@ -115,7 +115,7 @@ def test_slice_is_oriented_with_the_solid_on_the_left():
     v = result.prior.mean_vertices
     both_visible = ~sl.hidden[:-1] & ~sl.hidden[1:]
     # Outward normal (right of travel) faces the camera on seen edges.
-    side = cross2(np.diff(v, axis=0), sl.camera_xy - v[:-1])
+    side = cross(np.diff(v, axis=0), sl.camera_xy - v[:-1])
     assert np.mean(side[both_visible] < 0) > 0.95
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.geometry2d import cross
 from tactile_dock_ros.perception import evaluation, scenes
 from tactile_dock_ros.perception.config import (
     DepthNoise,
@@ -13,7 +14,7 @@ from tactile_dock_ros.perception.config import (
     PerceptionError,
     SurfaceParams,
 )
-from tactile_dock_ros.perception.geometry import cross2, point_segment_distances
+from tactile_dock_ros.perception.geometry import point_segment_distances
 from tactile_dock_ros.perception.render import render_depth
 from tactile_dock_ros.perception.slicing import band_points, extract_slice, profile_from_points
 from tactile_dock_ros.perception.surface import ray_sigma, surface_columns
@@ -192,7 +193,7 @@ def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
     # Walking on (solid on the left), each tail lies behind the line of sight through its end.
     for end, tail, sign in ((mean[-k - 1], mean[-k:], 1.0), (mean[k], mean[:k], -1.0)):
         ray = end - camera
-        assert np.all(sign * cross2(ray, tail - end) >= 0)
+        assert np.all(sign * cross(ray, tail - end) >= 0)
         assert np.linalg.norm(tail - end, axis=1).max() > 0.05
     # The tails move with their end vertices (calibration) and have their own spread.
     A = tailed.basis.reshape(tailed.n_vertices, 2, -1)

@@ -11,13 +11,13 @@ import time
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticStatus
 from node_helpers import launch_nodes, node_with_driver
 from rclpy.serialization import serialize_message
 from ros_helpers import spin_until
 from std_msgs.msg import UInt32
-from tactile_dock_ros.msg import DockingPlan
+from tactile_dock_ros.msg import DockingPlan, EpisodeCycle, EpisodeStatus
 
+from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.nodes import convert, journal, qos
 
 pytestmark = pytest.mark.dds
@@ -25,7 +25,7 @@ EPISODE = 77
 
 
 def _journal(directory, age_s: float) -> DockingPlan:
-    command = convert.PlanCommand(
+    command = PlanCommand(
         1, True, np.array([[0.0, 0.3], [0.0, 0.1]]), np.array([0.0, -1.0]), 3.0, 0.1, False,
         0.4, 0.4, 2, "", np.array([0.0, 0.1]), EPISODE, 0,
     )  # fmt: skip
@@ -56,11 +56,13 @@ def test_a_restarted_planner_resumes_the_running_episode(tmp_path):
     with _planner(tmp_path) as (node, driver, executor):
         driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
         driver.create_subscription(UInt32, "episode", episodes.append, qos.LATCHED)
-        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
         assert spin_until(executor, lambda: len(plans) >= 2 and episodes and statuses, 10.0)
         assert episodes[-1].data == EPISODE and node.awaiting_plan == 1
-        assert statuses[-1].message == "RUNNING: resumed after a restart"
-        assert {kv.key: kv.value for kv in statuses[-1].values}["cycles"] == "1"
+        status = statuses[-1]
+        assert (status.episode, status.state) == (EPISODE, EpisodeStatus.RUNNING)
+        assert status.detail == "resumed after a restart" and len(status.cycles) == 1
+        assert status.cycles[0].outcome == EpisodeCycle.PENDING  # its plan is executing
         assert all(p == plan for p in plans)  # copies of the journaled plan, its stamp included
         np.testing.assert_array_equal(node.episode_state.targets, [[0.0, 0.1]])
 
@@ -69,9 +71,10 @@ def test_an_old_journal_is_not_resumed(tmp_path):
     _journal(tmp_path / "state", age_s=1000.0)  # resume_timeout: 120 s
     statuses, plans = [], []
     with _planner(tmp_path) as (_, driver, executor):
-        driver.create_subscription(DiagnosticStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
         driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
         assert spin_until(executor, lambda: statuses, 10.0)
         assert not spin_until(executor, lambda: plans, 1.0)  # nothing resent
-    assert statuses[-1].message.startswith("ABORTED: not resumed"), statuses[-1].message
+    assert statuses[-1].state == EpisodeStatus.ABORTED, statuses[-1]
+    assert statuses[-1].detail.startswith("not resumed"), statuses[-1].detail
     assert journal.read(tmp_path / "state" / "planner.jsonl")[-1]["state"] == "ABORTED"

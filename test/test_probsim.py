@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tactile_dock_ros.core import problems, probsim, simulate
+from tactile_dock_ros.core.geometry2d import cross
 from tactile_dock_ros.core.shape import GaussianShape
 
 DOWN = np.array([0.0, -1.0])
@@ -72,9 +73,9 @@ def test_collision_probability_methods_against_monte_carlo():
     samples = shape.vertices(shape.sample_z(rng, 20000))
     c, d = samples[:, shape.edges[:, 0]], samples[:, shape.edges[:, 1]]
     move = path[1] - path[0]
-    den = simulate.cross(d - c, move)
-    s = simulate.cross(d - c, c - path[0]) / den
-    t = simulate.cross(move, c - path[0]) / den
+    den = cross(d - c, move)
+    s = cross(d - c, c - path[0]) / den
+    t = cross(move, c - path[0]) / den
     mc = np.mean((den > 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1), axis=0)
     for method in probsim.METHODS:
         p = probsim.collision_probabilities(path[0], path[1], shape, method)

@@ -108,7 +108,7 @@ NOT_BUSY = (
 # Each protection, removed in the processes by a sitecustomize, and the scenario that must catch it.
 MUTATIONS = {
     "workspace box": (
-        "import tactile_dock_ros.nodes.guarded as g\ng.Limits.inside = lambda self, p: True\n",
+        "import tactile_dock_ros.execution.guarded as g\ng.Limits.inside = lambda self, p: True\n",
         "target outside the workspace",
     ),
     "speed limit": (

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_dock_ros.core import problems, simulate
+from tactile_dock_ros.core.geometry2d import cross, outward_normal, perp
 from tactile_dock_ros.core.history import Status
 from tactile_dock_ros.core.simulate import Feature
 
@@ -104,10 +105,10 @@ def test_bad_input():
 
 def _crosses(a, b, vertices):
     c, d = vertices[:-1], vertices[1:]
-    den = simulate.cross(d - c, b - a)
+    den = cross(d - c, b - a)
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = simulate.cross(d - c, c - a) / den
-        t = simulate.cross(b - a, c - a) / den
+        s = cross(d - c, c - a) / den
+        t = cross(b - a, c - a) / den
     return bool(np.any((den != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)))
 
 
@@ -175,3 +176,13 @@ def test_feasible_without_compliance_needs_a_first_contact_that_sticks():
     assert not simulate.feasible(sloper, CORNER, compliant=False)
     assert not simulate.feasible(sloper, NOTCH, compliant=False)
     assert simulate.feasible(sloper, FLAT, compliant=False)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-10, 10), min_size=4, max_size=4))
+def test_plane_vector_helpers(values):
+    u, v = np.array(values[:2]), np.array(values[2:])
+    assert cross(u, v) == pytest.approx(perp(u) @ v, abs=1e-9)
+    np.testing.assert_array_equal(outward_normal(u), -perp(u))  # right of travel
+    assert cross(u, perp(u)) == pytest.approx(u @ u, abs=1e-9)  # perp turns counter-clockwise
+    np.testing.assert_array_equal(cross(np.stack([u, v]), v), [cross(u, v), cross(v, v)])

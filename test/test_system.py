@@ -19,6 +19,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
 from tactile_dock_ros.core import problems
+from tactile_dock_ros.execution.types import PlaneFrame
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.tools import bag, bringup, episode, replay
 
@@ -52,9 +53,7 @@ def _episode(tmp_path, seed: int):
         executor.shutdown()
         client.destroy_node()
         rclpy.shutdown(context=context)
-    plane = convert.PlaneFrame(
-        SHARED["plane_origin"], SHARED["plane_x_axis"], SHARED["plane_y_axis"]
-    )
+    plane = PlaneFrame(SHARED["plane_origin"], SHARED["plane_x_axis"], SHARED["plane_y_axis"])
     tool = np.array([convert.pose_position(p, plane) for p in poses])
     return record, tool
 

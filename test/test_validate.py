@@ -7,7 +7,6 @@ import re
 import numpy as np
 from builtin_interfaces.msg import Time
 from conftest import REPO_ROOT
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Vector3
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -16,6 +15,8 @@ from std_msgs.msg import Header
 from tactile_dock_ros.msg import (
     ContactSegment,
     DockingPlan,
+    EpisodeCycle,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -93,7 +94,7 @@ def test_execution_report(data, outcome, plan_id):
                           stop_point=Point(x=data.draw(SMALL), y=data.draw(SMALL)))  # fmt: skip
     report = _convert(convert.report_from_msg, msg)
     if report is not None:
-        assert outcome in convert.OUTCOME_NAMES and np.all(np.isfinite(report.stop_point))
+        assert outcome in convert.OUTCOMES and np.all(np.isfinite(report.stop_point))
         assert all(s.plan_id == plan_id for s in msg.segments)
 
 
@@ -115,12 +116,20 @@ def test_docking_plan(data, decision):
 
 
 @EXAMPLES
-@given(st.text(max_size=12), st.text(max_size=12))
-def test_episode_status(state, value):
-    msg = DiagnosticStatus(message=state, values=[KeyValue(key="episode", value=value)])
+@given(st.integers(0, 255), st.integers(0, 2**32 - 1), st.lists(
+    st.tuples(SMALL, SMALL, SMALL, SMALL, st.integers(0, 255)), max_size=4))  # fmt: skip
+def test_episode_status(state, episode, rows):
+    cycles = [EpisodeCycle(docking_probability=p, inference_time=i, planning_time=t,
+                           execution_time=e, outcome=o) for p, i, t, e, o in rows]  # fmt: skip
+    msg = EpisodeStatus(state=state, episode=episode, cycles=cycles)
     parsed = _convert(convert.episode_status_from_msg, msg)
+    assert (parsed is not None) == (state < len(convert.EPISODE_STATES))
     if parsed is not None:
-        assert 0 <= parsed[1] < 2**32 and parsed[1] == int(value)
+        assert parsed == (convert.EPISODE_STATES[state], episode)
+    records = _convert(convert.episode_cycles_from_msg, msg)
+    if records is not None:
+        assert len(records) == len(rows) and all(o in (*range(4), 254, 255) for *_, o in rows)
+        assert np.all(np.isfinite([r["p_dock"] + r["inference_s"] for r in records]))
 
 
 @EXAMPLES

@@ -6,9 +6,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tactile_dock_ros.nodes.convert import PlanCommand
+from tactile_dock_ros.execution.guarded import GuardedRun, Limits, Settings
+from tactile_dock_ros.execution.types import Outcome, PlanCommand
 from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
-from tactile_dock_ros.nodes.guarded import GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.watchdog import Admission, EpisodeGate, StreamWatch
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import ndtr
 
+from .geometry2d import cross
 from .history import History, Status
 from .shape import GaussianShape
 
@@ -61,7 +62,7 @@ def observation_primitives(history: History, friction: float) -> tuple[np.ndarra
     k = len(history)
     a, b = history.a, history.b
     r = b - a
-    cab = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]  # cross(a, b)
+    cab = cross(a, b)
     sign = np.zeros((k, N_SLOTS))
     lin = np.zeros((k, N_SLOTS, 4))
     const = np.zeros((k, N_SLOTS))

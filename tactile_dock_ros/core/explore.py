@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import planner, sampling, simulate
+from . import geometry2d, planner, sampling, simulate, slides
 from .episode import EpisodeState, PlannerConfig
 from .history import History, Status
 from .shape import GaussianShape
@@ -176,14 +176,11 @@ def slide_evidence(
     Under compliance a slipping tool then slides along the surface up to the vertex where it
     separates (Sec. V-A2), pushing along ``load`` and slipping all the way. The robot knows its
     trace, a polyline whose corners are where its direction changed; each straight piece
-    between two corners (a surface edge crossed completely) gives, at its middle, the
-    observation the first contact gave: a segment of length ``contact_resolution`` along
-    ``load`` through the point with the first contact's slip status (eq. 13). Decision: one
-    point per piece; two per piece pinned the surface so tightly that the sampler's seed search
-    failed on three_ledges (and then dropped consistent observations). Without
-    this the posterior only learns that the first contacted edge slips and keeps proposing the
-    edges the tool already slid over (three_ledges: P_dock stayed near 0.5 for 30 cycles on
-    infeasible truths), so the give-up test of Sec. III-B never fired.
+    between two corners (a surface edge crossed completely) gives one more slip observation
+    (``slides.crossed_piece_evidence``). Without this the posterior only learns that the first
+    contacted edge slips and keeps proposing the edges the tool already slid over
+    (three_ledges: P_dock stayed near 0.5 for 30 cycles on infeasible truths), so the give-up
+    test of Sec. III-B never fired.
     """
     obs = run.observations
     status = int(obs.status[-1]) if len(obs) else Status.FREE
@@ -195,7 +192,8 @@ def slide_evidence(
     v = np.asarray(ground_truth, float)
     edges, left, right = simulate.edge_index_arrays(len(v), closed)
     contact = 0.5 * (obs.a[-1] + obs.b[-1])
-    half = 0.5 * contact_resolution * simulate.unit(load, "load")
+    push = geometry2d.unit(load, "load")
+    half = 0.5 * contact_resolution * push
     hit, edge, _, _ = simulate.first_hits(
         v[None, edges[:, 0]], v[None, edges[:, 1]], contact - half, contact + half
     )
@@ -211,10 +209,10 @@ def slide_evidence(
             break
         trace.append(int(edges[nxt, 0] if going_left else edges[nxt, 1]))
     crossed = np.array(trace)  # edges crossed completely: between consecutive trace vertices
-    if len(crossed) < 2:
-        return obs
-    mid = 0.5 * (v[crossed[:-1]] + v[crossed[1:]])
-    return obs.extend(mid - half, mid + half, np.full(len(mid), status))
+    pieces = slides.crossed_piece_evidence(
+        v[crossed[:-1]], v[crossed[1:]], push, contact_resolution, status
+    )
+    return obs.extend(pieces.a, pieces.b, pieces.status)
 
 
 def _backed_off(run, path: np.ndarray, contact_resolution: float) -> np.ndarray:

@@ -20,6 +20,8 @@ import heapq
 import numpy as np
 import shapely
 
+from .geometry2d import cross
+
 # Distance (metres) the obstacle outline may move under simplification.
 _SIMPLIFY_TOLERANCE = 0.002
 # Corners of the visibility graph sit this far (metres) outside the obstacle.
@@ -187,7 +189,7 @@ def _convex_corners(obstacles) -> np.ndarray:
         c = np.asarray(ring.coords)[:-1]
         prev, nxt = np.roll(c, 1, axis=0), np.roll(c, -1, axis=0)
         e1, e2 = c - prev, nxt - c
-        turn = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        turn = cross(e1, e2)
         u1 = e1 / np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
         u2 = e2 / np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-300)
         out = u1 - u2

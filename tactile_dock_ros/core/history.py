@@ -25,6 +25,17 @@ class Status(IntEnum):
     SLIP_RIGHT = 4  # slid clockwise from the motion direction
 
 
+# The one colour (r, g, b, a) per status, for the figures (tools.figures) and the RViz markers
+# (nodes.markers) alike: free green, collide red, stick purple, slip left orange, right gold.
+STATUS_RGBA = {
+    Status.FREE: (0.17, 0.63, 0.17, 1.0),
+    Status.COLLIDE: (0.84, 0.15, 0.16, 1.0),
+    Status.STICK: (0.58, 0.40, 0.74, 1.0),
+    Status.SLIP_LEFT: (1.0, 0.50, 0.05, 1.0),
+    Status.SLIP_RIGHT: (1.0, 0.84, 0.0, 1.0),
+}
+
+
 @dataclass(frozen=True)
 class History:
     """Immutable batch of observations: ``a``, ``b`` (k, 2) metres, ``status`` (k,).

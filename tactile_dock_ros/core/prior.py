@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .geometry2d import outward_normal, perp
+
 
 def translation_columns(n: int, sigma_x: float, sigma_y: float) -> np.ndarray:
     """Localization error in translation: every vertex shifts alike. (2n, 2)."""
@@ -21,7 +23,7 @@ def translation_columns(n: int, sigma_x: float, sigma_y: float) -> np.ndarray:
 def rotation_column(vertices: np.ndarray, sensor: np.ndarray, sigma_theta: float) -> np.ndarray:
     """Small-angle rotation about the sensor, sigma_theta radians: sigma * (-dy, dx). (2n, 1)."""
     d = np.asarray(vertices, float) - np.asarray(sensor, float)
-    return sigma_theta * np.stack([-d[:, 1], d[:, 0]], axis=1).reshape(-1, 1)
+    return sigma_theta * perp(d).reshape(-1, 1)
 
 
 def ray_columns(vertices: np.ndarray, sensor: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -42,7 +44,7 @@ def vertex_normals(vertices: np.ndarray) -> np.ndarray:
     v = np.asarray(vertices, float)
     tangent = np.gradient(v, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    return np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    return outward_normal(tangent)
 
 
 def smooth_normal_columns(

@@ -38,9 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from . import bvn
+from . import bvn, geometry2d
+from .geometry2d import unit
 from .shape import GaussianShape
-from .simulate import edge_index_arrays, friction_functionals, unit
+from .simulate import edge_index_arrays, friction_functionals
 
 METHODS = ("bivariate", "univariate", "sequential")
 L_, R_, N_ = 0, 1, 2  # rows of simulate.friction_functionals: slide left, slide right, facing
@@ -180,11 +181,6 @@ def _move_endpoints(a, b) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
-def _rot(v: np.ndarray) -> np.ndarray:
-    """(..., 2) vectors turned by +90 degrees: (x, y) -> (-y, x); cross(u, v) = rot(u) . v."""
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
-
-
 def _conditions(a, b, c, d):
     """Conditions (7-10) for move a -> b and edge y = (c, d), all broadcastable (..., 2), as
     functions of y that must be >= 0: values at the mean (4, ...) and gradients (..., 4, 4)
@@ -283,10 +279,10 @@ def _contact_events_sequential(a, b, shape: GaussianShape, load, means, covs) ->
     fric_var = np.diagonal(fric_cov, axis1=1, axis2=2)
     event_ok = np.all(_likely(fric_mean, fric_var, h_min)[:, _EVENT_PICK[:, 4:] - 4], axis=2).T
     # Cheap first pass over all (K, E): (III) and (IV) are linear in c resp. d with gradient
-    # +-rot(b - a), so their means and variances are (K, 2) x (2, E) and (K, 4) x (4, E) products.
+    # +-perp(b - a), so their means and variances are (K, 2) x (2, E) and (K, 4) x (4, E) products.
     move = b - a
-    perp = _rot(move)  # (K, 2)
-    along = np.sum(perp * a, axis=1)[:, None]  # rot(move) . a
+    perp = geometry2d.perp(move)  # (K, 2)
+    along = np.sum(perp * a, axis=1)[:, None]  # perp(move) . a
     outer = (perp[:, :, None] * perp[:, None, :]).reshape(-1, 4)  # (K, 4)
     still = (np.linalg.norm(move, axis=1) == 0.0)[:, None]
     keep = ~still & event_ok.any(axis=0)[None]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import problems
+from .geometry2d import cross, outward_normal
 from .history import History, Status
 from .problems import Problem
 
@@ -36,9 +37,6 @@ def straight_probe(
     c, d = v[idx], v[(idx + 1) % n]
     e = d - c
 
-    def cross(p, q):
-        return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
-
     denom = cross(u, e)  # < 0: the ray enters the solid across the edge (alpha > 0, eq. 6)
     with np.errstate(divide="ignore", invalid="ignore"):
         s = cross(c - start, e) / denom
@@ -48,7 +46,7 @@ def straight_probe(
         return History([start], [start + reach * u], [Status.FREE])
     j = np.flatnonzero(hit)[np.argmin(s[hit])]
     contact = start + s[j] * u
-    normal = np.array([e[j, 1], -e[j, 0]]) / np.linalg.norm(e[j])
+    normal = outward_normal(e[j]) / np.linalg.norm(e[j])
     tangent = e[j] / np.linalg.norm(e[j])
     push = -u  # the reversed motion must lie in the friction cone to stick (eq. 12)
     vn, ve = push @ normal, push @ tangent

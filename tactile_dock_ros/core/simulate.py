@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .geometry2d import cross, perp, unit
 from .history import History, Status
 
 # Outcome codes of the batched simulation.
@@ -56,20 +57,6 @@ class Execution:
     observations: History
 
 
-def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """z of the 2-D cross product over the last axis: u_x v_y - u_y v_x."""
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def unit(vector, name: str) -> np.ndarray:
-    """Finite, non-zero 2-vector scaled to unit length; ValueError otherwise."""
-    v = np.asarray(vector, dtype=float).reshape(2)
-    norm = float(np.hypot(*v))
-    if not np.isfinite(norm) or norm <= 0.0:
-        raise ValueError(f"{name} must be a finite non-zero 2-vector, got {v}")
-    return v / norm
-
-
 def friction_functionals(load, friction: float) -> np.ndarray:
     """(3, 2) rows wL, wR, wN: slide-left / slide-right / facing tests ``w . t > 0`` on t = d - c.
 
@@ -79,7 +66,7 @@ def friction_functionals(load, friction: float) -> np.ndarray:
     cone), and toward d iff -r . t > mu r_perp . t.
     """
     r = -unit(load, "load")
-    r_perp = np.array([-r[1], r[0]])
+    r_perp = perp(r)
     return np.stack([r - friction * r_perp, -r - friction * r_perp, r_perp])
 
 

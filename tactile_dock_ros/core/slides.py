@@ -3,7 +3,8 @@
 A slipping loading contact under compliance slides along the surface, in the slip direction,
 until it sticks at a feature or separates. The history records the slide as slip observations
 (eq. 13): the first contact, then one at the middle of every edge the trace crossed
-(``explore.slide_evidence``, the executor's ``crossed_pieces``). Each observation constrains
+(``crossed_piece_evidence``, for the simulated robot's ``explore.slide_evidence`` and the
+executor's ``execution.guarded``). Each observation constrains
 only the edge it lands on, so a posterior sample may put a short edge that holds the load
 between two of them (three_ledges: ~1 % of the samples on a ledge the tool had slid down, which
 kept infeasible episodes from giving up). The slide says more: the tool passed over every edge
@@ -21,6 +22,23 @@ from . import simulate
 from .history import History, Status
 
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
+
+
+def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status) -> History:
+    """The slip observations of the pieces ``starts`` -> ``ends`` (k, 2) of a slide that the tool
+    crossed completely after its first contact: one per piece, the observation the first contact
+    gave, at the piece's middle: a segment ``contact_resolution`` long along the unit ``push``
+    (the load) with the first contact's slip ``status`` (eq. 13).
+
+    Decision: one observation per piece; two per piece pinned the surface so tightly that the
+    sampler's seed search failed on three_ledges (and then dropped consistent observations).
+    The pieces are the ground-truth edges the simulated robot slid over
+    (``explore.slide_evidence``), or the straight runs of the executor's trace
+    (``execution.guarded.crossed_pieces``).
+    """
+    middle = 0.5 * (np.reshape(starts, (-1, 2)) + np.reshape(ends, (-1, 2)))
+    half = 0.5 * contact_resolution * np.asarray(push, float)
+    return History(middle - half, middle + half, np.full(len(middle), int(status)))
 
 
 def slide_groups(history: History, move_ids, dropped=()) -> list[np.ndarray]:
@@ -64,8 +82,8 @@ def consistent_with_slides(
     lands nowhere constrains it not at all: the sampler already checked each row (eq. 13), so
     such a row is one the sampler's model and the exact crossing test disagree on, not
     evidence against the sample. The truth passes for loading moves along the load (the
-    planner's terminal segments): ``explore.slide_evidence`` and the executor's
-    ``crossed_pieces`` report only edges the slide crossed on the way down.
+    planner's terminal segments): ``crossed_piece_evidence`` reports only edges the slide
+    crossed on the way down.
     """
     vertices = np.asarray(vertices, float)
     ok = np.ones(len(vertices), dtype=bool)

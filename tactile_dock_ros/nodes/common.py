@@ -15,9 +15,10 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from std_msgs.msg import Header
 
+from tactile_dock_ros.execution.types import PlaneFrame
 from tactile_dock_ros.nodes import validate
-from tactile_dock_ros.nodes.convert import MessageError, PlaneFrame
 from tactile_dock_ros.nodes.params import Param
+from tactile_dock_ros.nodes.validate import MessageError
 
 # Seconds between two log lines of one cause of malformed input on one topic.
 MALFORMED_LOG_PERIOD_S = 10.0

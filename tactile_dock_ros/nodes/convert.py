@@ -7,13 +7,13 @@ core or a node's state. The checks it shares with the subscription guard (``comm
 finiteness, size limits read from the length fields, stamps, frames) are in ``nodes.validate``.
 Points in the docking plane are ``geometry_msgs/Point`` with z = 0.
 
-The docking plane is embedded in the robot's 3-D base frame by a :class:`PlaneFrame` (tf2 is
-not used, so the transform is a node parameter: docs/nodes.md, "Running it").
+The message types' ROS-free counterparts (``PlaneFrame``, ``PlanCommand``, ``Report``) are in
+``execution.types``; the docking plane is embedded in the robot's 3-D base frame by a
+``PlaneFrame`` (tf2 is not used, so the transform is a node parameter: docs/nodes.md, "Running
+it").
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 from geometry_msgs.msg import (
@@ -30,12 +30,21 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from tactile_dock_ros.core.episode import EpisodeState
-from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.execution.types import (
+    UNIT_TOLERANCE,
+    Outcome,
+    PlanCommand,
+    PlaneFrame,
+    Report,
+)
 from tactile_dock_ros.msg import (
     ContactHistory,
     ContactSegment,
     DockingPlan,
+    EpisodeCycle,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -45,8 +54,7 @@ from tactile_dock_ros.nodes.validate import MessageError, finite
 from tactile_dock_ros.perception import depth as depth_codec
 from tactile_dock_ros.perception.config import PerceptionError
 
-# Tolerance (dimensionless) on |load_direction| = 1 and on plane axis orthonormality.
-UNIT_TOLERANCE = 1e-3
+OUTCOMES = {outcome.value for outcome in Outcome}  # the ExecutionReport outcome constants
 
 
 def _points(name: str, points, limit: int) -> np.ndarray:
@@ -59,45 +67,7 @@ def _point(xy) -> Point:
     return Point(x=float(xy[0]), y=float(xy[1]), z=0.0)
 
 
-# --------------------------------------------------------------------------- plane embedding
-
-
-@dataclass(frozen=True)
-class PlaneFrame:
-    """The docking plane in the arm's base frame: origin (3,) metres, orthonormal axes (3,)."""
-
-    origin: np.ndarray
-    x_axis: np.ndarray
-    y_axis: np.ndarray
-
-    def __post_init__(self) -> None:
-        rows = np.array([self.origin, self.x_axis, self.y_axis], dtype=float)
-        if rows.shape != (3, 3) or not np.all(np.isfinite(rows)):
-            raise ValueError("plane origin and axes must be finite 3-vectors")
-        gram = rows[1:] @ rows[1:].T
-        if not np.allclose(gram, np.eye(2), atol=UNIT_TOLERANCE):
-            raise ValueError(f"plane axes must be orthonormal, got x={rows[1]}, y={rows[2]}")
-        for name, value in zip(("origin", "x_axis", "y_axis"), rows, strict=True):
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-
-    @property
-    def axes(self) -> np.ndarray:
-        """(2, 3): the plane axes as rows."""
-        return np.stack([self.x_axis, self.y_axis])
-
-    def point_to_plane(self, p3) -> np.ndarray:
-        """Base-frame point(s) (..., 3) -> plane coordinates (..., 2), dropping the normal part."""
-        return (np.asarray(p3, float) - self.origin) @ self.axes.T
-
-    def point_from_plane(self, p2) -> np.ndarray:
-        return self.origin + np.asarray(p2, float) @ self.axes
-
-    def vector_to_plane(self, v3) -> np.ndarray:
-        return np.asarray(v3, float) @ self.axes.T
-
-    def vector_from_plane(self, v2) -> np.ndarray:
-        return np.asarray(v2, float) @ self.axes
+# --------------------------------------------------------------------------- arm and sensors
 
 
 def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
@@ -277,26 +247,6 @@ def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
 # --------------------------------------------------------------------------- plans
 
 
-@dataclass(frozen=True)
-class PlanCommand:
-    """A validated DockingPlan: waypoints (L, 2) metres, load (2,) unit vector."""
-
-    plan_id: int
-    dock: bool
-    waypoints: np.ndarray
-    load: np.ndarray
-    force_threshold: float  # newtons
-    max_speed: float  # metres per second
-    compliant: bool
-    p_dock: float
-    objective: float
-    target_edge: int
-    reason: str
-    target_point: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # (2,) metres
-    episode: int = 0
-    history_length: int = 0  # contact_history segments the plan was made on
-
-
 def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
     return DockingPlan(
         header=header,
@@ -364,39 +314,6 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
 
 # --------------------------------------------------------------------------- execution reports
 
-OUTCOME_NAMES = {
-    ExecutionReport.DOCKED: "DOCKED",
-    ExecutionReport.CONTACT_FAILED: "CONTACT_FAILED",
-    ExecutionReport.NO_CONTACT: "NO_CONTACT",
-    ExecutionReport.ABORTED: "ABORTED",
-}
-
-
-@dataclass(frozen=True)
-class Report:
-    """A validated ExecutionReport: the segments as a History, stop point (2,) metres."""
-
-    plan_id: int
-    outcome: int
-    history: History
-    stop_point: np.ndarray
-    detail: str
-    episode: int = 0
-
-    @property
-    def outcome_name(self) -> str:
-        return OUTCOME_NAMES[self.outcome]
-
-    @property
-    def producer_lost(self) -> bool:
-        """An ABORTED attempt the executor stopped because the planner fell silent: the
-        episode goes on when the planner is back (docs/nodes.md, "Restart without loss")."""
-        return self.outcome == ExecutionReport.ABORTED and self.detail.startswith(PRODUCER_LOST)
-
-
-# ExecutionReport.detail of an attempt stopped because no copy of its plan arrived in time.
-PRODUCER_LOST = "producer lost:"
-
 
 def report_to_msg(report: Report, header: Header) -> ExecutionReport:
     return ExecutionReport(
@@ -411,7 +328,7 @@ def report_to_msg(report: Report, header: Header) -> ExecutionReport:
 
 
 def report_from_msg(msg: ExecutionReport) -> Report:
-    if msg.outcome not in OUTCOME_NAMES:
+    if msg.outcome not in OUTCOMES:
         raise MessageError(f"unknown outcome {msg.outcome}")
     history = history_from_segments(msg.segments)
     if any(s.plan_id != msg.plan_id for s in msg.segments):
@@ -426,10 +343,6 @@ def report_from_msg(msg: ExecutionReport) -> Report:
     )
 
 
-def status_name(status: int) -> str:
-    return Status(status).name
-
-
 # --------------------------------------------------------------------------- episodes
 
 
@@ -440,13 +353,71 @@ def episode_from_msg(msg) -> int:
     return int(msg.data)
 
 
-def episode_status_from_msg(msg) -> tuple[str, int]:
-    """The planner's episode_status (DiagnosticStatus) -> (state, episode id); the state is the
-    message up to the first ':', the id the ``episode`` value (0 when absent)."""
-    value = next((kv.value for kv in msg.values if kv.key == "episode"), "0")
-    if not value.isdecimal() or int(value) >= 2**32:
-        raise MessageError(f"episode_status episode {value!r} is not a uint32")
-    return msg.message.split(":")[0], int(value)
+# EpisodeStatus.state constants by name (the planner's states); a cycle's outcome is an Outcome
+# name, INTERRUPTED (the executor stopped it because the planner fell silent) or '' (no report).
+EPISODE_STATES = ("IDLE", "RUNNING", "DOCKED", "GAVE_UP", "ABORTED")
+INTERRUPTED = "INTERRUPTED"
+_STATE_NAMES = {getattr(EpisodeStatus, name): name for name in EPISODE_STATES}
+_CYCLE_OUTCOMES = {
+    "": EpisodeCycle.PENDING,
+    INTERRUPTED: EpisodeCycle.INTERRUPTED,
+    **{outcome.name: outcome.value for outcome in Outcome},
+}
+_CYCLE_OUTCOME_NAMES = {code: name for name, code in _CYCLE_OUTCOMES.items()}
+
+
+def episode_status_to_msg(
+    header: Header, state: str, episode: int, detail: str, prior_vertices: int, cycles
+) -> EpisodeStatus:
+    """The planner's episode status; ``state`` one of EPISODE_STATES, ``cycles`` its records in
+    order (dicts: p_dock, inference_s, planning_s and, once reported, execution_s and outcome)."""
+    return EpisodeStatus(
+        header=header,
+        episode=int(episode),
+        state=getattr(EpisodeStatus, state),
+        detail=detail,
+        prior_vertices=int(prior_vertices),
+        cycles=[
+            EpisodeCycle(
+                docking_probability=float(c["p_dock"]),
+                inference_time=float(c["inference_s"]),
+                planning_time=float(c["planning_s"]),
+                execution_time=float(c.get("execution_s", 0.0)),
+                outcome=_CYCLE_OUTCOMES[c.get("outcome", "")],
+            )
+            for c in cycles
+        ],
+    )
+
+
+def episode_status_from_msg(msg: EpisodeStatus) -> tuple[str, int]:
+    """EpisodeStatus -> (state, one of EPISODE_STATES; episode id)."""
+    if msg.state not in _STATE_NAMES:
+        raise MessageError(f"unknown episode state {msg.state}")
+    return _STATE_NAMES[msg.state], int(msg.episode)
+
+
+def episode_cycles_from_msg(msg: EpisodeStatus) -> list[dict]:
+    """EpisodeStatus.cycles -> the records ``episode_status_to_msg`` took (execution_s None and
+    outcome '' while a cycle has no report)."""
+    validate.bounded("cycles count", len(msg.cycles), validate.MAX_CYCLES)
+    records = []
+    for c in msg.cycles:
+        if c.outcome not in _CYCLE_OUTCOME_NAMES:
+            raise MessageError(f"unknown cycle outcome {c.outcome}")
+        values = finite("cycle", [c.docking_probability, c.inference_time, c.planning_time,
+                                  c.execution_time])  # fmt: skip
+        outcome = _CYCLE_OUTCOME_NAMES[c.outcome]
+        records.append(
+            {
+                "p_dock": values[0],
+                "inference_s": values[1],
+                "planning_s": values[2],
+                "execution_s": values[3] if outcome else None,
+                "outcome": outcome,
+            }
+        )
+    return records
 
 
 # --------------------------------------------------------------------------- depth camera

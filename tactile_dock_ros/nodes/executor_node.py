@@ -2,16 +2,16 @@
 
 Subscribes ``plan`` (DockingPlan), ``tool_pose`` (PoseStamped, base frame), ``wrench``
 (WrenchStamped, F/T sensor, in the base frame or the tool frame: ``wrench_frame``) and the
-planner's ``episode_status`` (a plan of an episode that ended or was superseded is stopped); the
-planner resends the plan being executed every 0.5 s: when no copy arrived for
+planner's ``episode_status`` (EpisodeStatus: a plan of an episode that ended or was superseded
+is stopped); the planner resends the plan being executed every 0.5 s: when no copy arrived for
 ``producer_timeout`` the planner is gone (crashed, killed) and the arm is stopped (ABORTED,
-detail ``convert.PRODUCER_LOST``; a restarted planner replans);
+detail ``execution.types.PRODUCER_LOST``; a restarted planner replans);
 publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a plan runs, and
 ``execution_report`` (ExecutionReport, with the plan's episode and id) when it ends, and
 ``/diagnostics`` (DiagnosticArray, every ``diagnostics_period``: ``nodes.diagnostics``). Messages
 in an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
 safety checks (the force limit on the whole 3-D force, out-of-plane pushes included) are in
-``nodes.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
+``execution.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
 this file is the ROS glue. An ABORTED report carries no segments: what an aborted attempt felt
 is not evidence (a stale sensor or a stopped plan may have misread it).
 """
@@ -19,12 +19,14 @@ is not evidence (a stale sensor or a stopped plan may have misread it).
 from __future__ import annotations
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 
 from tactile_dock_ros.core.history import History
-from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
+from tactile_dock_ros.execution.types import PRODUCER_LOST, Outcome, Report
+from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos, validate
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
@@ -35,7 +37,6 @@ from tactile_dock_ros.nodes.common import (
     subscribe,
 )
 from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
-from tactile_dock_ros.nodes.guarded import ForceFilter, GuardedRun, Limits, Outcome, Settings
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.nodes.watchdog import Admission, EpisodeGate
 
@@ -135,7 +136,7 @@ class ExecutorNode(Node):
         subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id)
         subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id)
         subscribe(self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id)
-        subscribe(self, DiagnosticStatus, "episode_status", self.on_episode_status, qos.LATCHED)
+        subscribe(self, EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED)
         self.create_timer(self.dt, self.on_tick)
         self.create_timer(self.p.diagnostics_period, self.publish_diagnostics)
 
@@ -208,7 +209,7 @@ class ExecutorNode(Node):
             )
         self.last_plan = (plan.episode, plan.plan_id)
 
-    def on_episode_status(self, msg: DiagnosticStatus) -> None:
+    def on_episode_status(self, msg: EpisodeStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state, episode = convert.episode_status_from_msg(msg)
         self.gate.update(episode, state)
@@ -253,7 +254,7 @@ class ExecutorNode(Node):
         self.health.ticks.add(now_seconds(self))
         silent = now_seconds(self) - self.plan_heard[1]
         if silent > self.p.producer_timeout and self.busy():
-            why = f"{convert.PRODUCER_LOST} no copy of the plan for {silent:.1f} s"
+            why = f"{PRODUCER_LOST} no copy of the plan for {silent:.1f} s"
             if self.run is not None and not self.run.done:
                 self.run.abort(why, self.tool)  # stopped and reported below
             elif self.pending is not None:
@@ -323,7 +324,7 @@ class ExecutorNode(Node):
             self.health.counts["plans_refused" if refused else "plans_aborted"] += 1
             if not refused:
                 self.health.fault(now_seconds(self), f"plan {plan.plan_id}: {detail}")
-        report = convert.Report(
+        report = Report(
             episode=plan.episode,
             plan_id=plan.plan_id,
             outcome=outcome.value,

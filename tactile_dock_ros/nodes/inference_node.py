@@ -37,6 +37,7 @@ from visualization_msgs.msg import MarkerArray
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
+from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 from tactile_dock_ros.nodes import convert, journal, markers, qos
 from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
@@ -157,7 +158,7 @@ class InferenceNode(Node):
         if self.apply(report):
             self.changed()
 
-    def apply(self, report: convert.Report) -> bool:
+    def apply(self, report: Report) -> bool:
         """Add a report of the current episode to the history (journaled first); False for a
         duplicate (the executor's reports are latched: a restart receives them again)."""
         if report.plan_id <= max(self.handled_plans, default=0):  # plans run one at a time

@@ -7,8 +7,7 @@ from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from tactile_dock_ros.core.history import History, Status
-from tactile_dock_ros.tools.figures import STATUS_RGBA
+from tactile_dock_ros.core.history import STATUS_RGBA, History, Status
 
 
 def _strip(header: Header, ns: str, index: int, points, rgba, width: float = 0.003) -> Marker:

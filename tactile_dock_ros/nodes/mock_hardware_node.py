@@ -1,7 +1,7 @@
 """mock_hardware: simulated arm + F/T sensor on a ground-truth terrain (docs/nodes.md).
 
 Integrates ``cmd_twist`` (TwistStamped, base frame; a command older than ``command_timeout``
-counts as zero) for a point tool against the terrain with ``nodes.mock_physics`` at ``rate_hz``
+counts as zero) for a point tool against the terrain with ``execution.mock_physics`` at ``rate_hz``
 and publishes ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped, environment force on
 the tool plus a constant bias and Gaussian noise). The terrain is drawn from a benchmark problem
 with a seed, or read from a YAML file (``vertices: [[x, y], ...]``, ``start: [x, y]``, optional
@@ -28,6 +28,7 @@ from std_srvs.srv import SetBool
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.shape import GaussianShape
+from tactile_dock_ros.execution.mock_physics import PointToolSim
 from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import (
@@ -38,7 +39,6 @@ from tactile_dock_ros.nodes.common import (
     run,
     subscribe,
 )
-from tactile_dock_ros.nodes.mock_physics import PointToolSim
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.mock_camera import MockCamera

@@ -11,8 +11,8 @@ calls ``core.planner.plan`` and publishes a ``plan`` (DockingPlan). What it plan
 points of the episode's plans) and one ``PlannerConfig`` (the parameters, mapped once by
 ``planner_config``). The executor's ``execution_report`` ends the cycle. The episode ends DOCKED (a
 report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without docking) or
-ABORTED (the executor aborted). ``episode_status`` (diagnostic_msgs/DiagnosticStatus, latched)
-carries the state, the prior's vertex count (0: none yet) and the per-cycle latencies.
+ABORTED (the executor aborted). ``episode_status`` (EpisodeStatus, latched) carries the state, the
+prior's vertex count (0: none yet) and each cycle's P_dock, latencies and outcome.
 
 Restart without loss: with ``state_directory`` set, the episode's events (start, each plan with
 its serialized message, each report's outcome, the end) go to a journal (``nodes.journal``,
@@ -30,7 +30,6 @@ import base64
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
@@ -40,9 +39,11 @@ from std_srvs.srv import Trigger
 
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.planner import plan as plan_docking
+from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.msg import (
     ContactHistory,
     DockingPlan,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -117,7 +118,7 @@ class PlannerNode(Node):
         self.episode_start = None
         self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
-        self.status_pub = self.create_publisher(DiagnosticStatus, "episode_status", qos.LATCHED)
+        self.status_pub = self.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
         plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
         subscriptions = [
             (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, plane_id),
@@ -266,7 +267,7 @@ class PlannerNode(Node):
                 self.get_logger().info(message)
         dock = result.decision == "dock"
         history_length = len(self.episode_state.history)
-        command = convert.PlanCommand(
+        command = PlanCommand(
             plan_id=len(self.cycles) + 1,
             dock=dock,
             # A give-up carries the tool position alone, so a recorded plan is self-contained.
@@ -401,26 +402,11 @@ class PlannerNode(Node):
         self.get_logger().info(f"episode {self.episode}: {state} after {len(self.cycles)} cycles")
         self.publish_status(why)
 
-    def publish_status(self, message: str = "") -> None:
-        values = {
-            "episode": self.episode,
-            "cycles": len(self.cycles),
-            "prior_vertices": 0 if self.prior is None else self.prior.n_vertices,
-        }
-        for i, cycle in enumerate(self.cycles, start=1):
-            for key in ("p_dock", "inference_s", "planning_s", "execution_s", "outcome"):
-                if key in cycle:
-                    values[f"cycle{i}.{key}"] = cycle[key]
-        level = (
-            DiagnosticStatus.OK if self.state in (RUNNING, DOCKED, IDLE) else DiagnosticStatus.WARN
-        )
+    def publish_status(self, detail: str = "") -> None:
+        prior_vertices = 0 if self.prior is None else self.prior.n_vertices
         self.status_pub.publish(
-            DiagnosticStatus(
-                level=level,
-                name=f"{self.get_name()}: episode",
-                message=f"{self.state}: {message}" if message else self.state,
-                hardware_id="tactile_dock",
-                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+            convert.episode_status_to_msg(
+                header(self, ""), self.state, self.episode, detail, prior_vertices, self.cycles
             )
         )
 

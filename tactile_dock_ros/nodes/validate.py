@@ -20,6 +20,7 @@ MAX_SAMPLES = 100_000  # ShapeSamples num_samples
 MAX_VALUES = 10_000_000  # floats in one array field (80 MB)
 MAX_SEGMENTS = 100_000  # contact segments in a history or report
 MAX_WAYPOINTS = 1_000  # DockingPlan waypoints
+MAX_CYCLES = 1_000  # EpisodeStatus cycles (the planner's max_cycles is at most 1000)
 MAX_PIXELS = 4096 * 4096  # depth image width * height
 # A stamp further ahead of the receiving node's clock than this is a clock fault (seconds).
 MAX_STAMP_LEAD_S = 5.0

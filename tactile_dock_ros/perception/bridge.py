@@ -23,6 +23,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core.geometry2d import perp
+
 _TWO_PI = 2.0 * np.pi
 _MAX_BOUNCES_PER_TRAJECTORY = 10_000
 
@@ -137,7 +139,7 @@ def occlusion_columns(
     length = float(np.linalg.norm(chord))
     if k < 1 or length <= 0:
         raise ValueError("a bridge needs k >= 1 interior points between distinct ends")
-    normal = side * np.array([-chord[1], chord[0]]) / length  # left of a -> b: hidden side
+    normal = side * perp(chord) / length  # left of a -> b: hidden side
     cov = bridge_covariance(k, length, sigma, free_end)
     chol = np.linalg.cholesky(cov)
     F = np.hstack([normal[0] * chol, normal[1] * chol])  # n . W_j on whitened (xi_x, xi_y)

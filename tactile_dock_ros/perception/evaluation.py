@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.geometry2d import cross, outward_normal
 from ..core.shape import GaussianShape
-from .geometry import cross2, perturb_pose, resample_polyline
+from .geometry import perturb_pose, resample_polyline
 from .surface import run_normals
 
 _EPS = 1e-9
@@ -23,11 +24,11 @@ def visible_from(polyline: np.ndarray, camera_xy: np.ndarray, points: np.ndarray
     c = np.asarray(camera_xy, float)
     d = np.asarray(points, float)[:, None, :] - c  # (k, 1, 2)
     p, e = polyline[None, :-1], np.diff(polyline, axis=0)[None]
-    denom = cross2(d, e)
+    denom = cross(d, e)
     w = p - c
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = cross2(w, e) / denom  # along camera -> point, 1 at the point
-        lam = cross2(w, d) / denom
+        s = cross(w, e) / denom  # along camera -> point, 1 at the point
+        lam = cross(w, d) / denom
     length = np.linalg.norm(d, axis=-1)
     blocked = (lam >= -_EPS) & (lam <= 1 + _EPS) & (s > _EPS) & (s < 1 - 1e-6 / length)
     return ~blocked.any(axis=1)
@@ -120,11 +121,11 @@ def normal_deviations(
     v = np.asarray(vertices, float)[:, None, :]
     nrm = np.asarray(normals, float)[:, None, :]
     p, e = terrain[None, :-1], np.diff(terrain, axis=0)[None]
-    denom = cross2(nrm, e)
+    denom = cross(nrm, e)
     w = p - v
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = cross2(w, e) / denom
-        lam = cross2(w, nrm) / denom
+        t = cross(w, e) / denom
+        lam = cross(w, nrm) / denom
     t = np.where((lam >= 0) & (lam <= 1) & np.isfinite(t), t, np.inf)
     best = np.take_along_axis(t, np.argmin(np.abs(t), axis=1)[:, None], axis=1)[:, 0]
     return np.where(np.abs(best) <= max_distance_m, best, np.nan)
@@ -191,7 +192,7 @@ def edge_angle_stats(prior: GaussianShape) -> tuple[np.ndarray, np.ndarray]:
     A = prior.basis.reshape(prior.n_vertices, 2, -1)
     e = np.diff(mean, axis=0)
     length = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
-    normal = np.stack([e[:, 1], -e[:, 0]], axis=1) / length[:, None]
+    normal = outward_normal(e) / length[:, None]
     rows = np.einsum("ei,eik->ek", normal, A[1:] - A[:-1]) / length[:, None]
     std = np.linalg.norm(rows, axis=1)
     corr = np.sum(rows[:-1] * rows[1:], axis=1) / np.maximum(std[:-1] * std[1:], 1e-300)

@@ -1,4 +1,5 @@
-"""Camera rays, pose perturbations and 2-D polyline helpers shared by rendering and slicing."""
+"""Camera rays, pose perturbations and 2-D polyline helpers shared by rendering and slicing
+(2-D vector helpers: ``core.geometry2d``)."""
 
 from __future__ import annotations
 
@@ -29,11 +30,6 @@ def pixel_rays(K: np.ndarray, width: int, height: int) -> np.ndarray:
     y = (v - cy) / fy
     x = (u - cx - skew * y) / fx
     return np.stack([x, y, np.ones_like(x)], axis=-1)
-
-
-def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """z-component of the 2-D cross product, broadcasting over leading axes."""
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
 def arc_length(points: np.ndarray) -> np.ndarray:

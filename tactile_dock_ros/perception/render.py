@@ -11,8 +11,9 @@ import itertools
 
 import numpy as np
 
+from ..core.geometry2d import cross
 from .config import DepthNoise
-from .geometry import cross2, perturb_pose, pixel_rays
+from .geometry import perturb_pose, pixel_rays
 
 
 def render_depth(
@@ -58,11 +59,11 @@ def render_depth(
     # One vectorized pass per edge keeps memory at O(pixels) instead of O(pixels x edges).
     for p, q in itertools.pairwise(verts):
         e = q - p
-        denom = cross2(dxy, e)
+        denom = cross(dxy, e)
         w = p - origin[:2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            s = cross2(w, e) / denom
-            lam = cross2(w, dxy) / denom
+            s = cross(w, e) / denom
+            lam = cross(w, dxy) / denom
         hit = (
             (lam >= 0)
             & (lam <= 1)

@@ -35,7 +35,7 @@ EPISODE_TOPICS = {
     "/shape_samples": "tactile_dock_ros/msg/ShapeSamples",
     "/plan": "tactile_dock_ros/msg/DockingPlan",
     "/execution_report": "tactile_dock_ros/msg/ExecutionReport",
-    "/episode_status": "diagnostic_msgs/msg/DiagnosticStatus",
+    "/episode_status": "tactile_dock_ros/msg/EpisodeStatus",
 }
 # The QoS each topic is published with (nodes.qos): what a bag offers when it is played.
 QOS = {

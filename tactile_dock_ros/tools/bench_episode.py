@@ -42,7 +42,7 @@ def add_arguments(parser) -> None:
 def ended_by(record) -> str:
     """'docked', 'planner' (its GIVE_UP decision), 'budget' (``max_cycles`` spent), 'no_shape'
     (inference found none) or the final state in lower case (aborted, none)."""
-    message = record.status.message if record.status is not None else ""
+    message = record.detail
     if record.state == "DOCKED":
         return "docked"
     if record.state != "GAVE_UP":
@@ -87,7 +87,7 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
         "feasible_non_compliant": bool(simulate.feasible(spec, truth, compliant=False)),
         "state": record.state,
         "ended_by": ended_by(record),
-        "message": record.status.message if record.status is not None else "",
+        "message": record.detail,
         "cycles": len(cycles),
         "p_dock": [c["p_dock"] for c in cycles],
         "wall_s": record.wall_seconds,

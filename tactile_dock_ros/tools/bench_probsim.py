@@ -17,6 +17,7 @@ import numpy as np
 from scipy.stats import multivariate_normal
 
 from ..core import bvn, problems, probsim, simulate
+from ..core.geometry2d import outward_normal
 
 
 def _positive(text: str) -> int:
@@ -52,7 +53,7 @@ def _random_segments(rng, count):
     d = c + length[:, None] * t
     root = rng.normal(size=(count, 4, 4)) * rng.uniform(0.005, 0.05, (count, 1, 1))
     covs = root @ np.swapaxes(root, 1, 2)
-    normal = np.stack([t[:, 1], -t[:, 0]], 1)
+    normal = outward_normal(t)
     target = c + rng.uniform(-0.2, 1.2, (count, 1)) * (d - c)
     tilt = rng.uniform(-1.0, 1.0, count)
     rot = np.stack([np.cos(tilt), -np.sin(tilt), np.sin(tilt), np.cos(tilt)], 1).reshape(-1, 2, 2)

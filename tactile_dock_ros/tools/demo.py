@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         executor.shutdown()
         client.destroy_node()
         rclpy.shutdown()
-    why = record.status.message if record.status is not None else "no episode status"
+    why = record.detail if record.status is not None else "no episode status"
     print(f"result: {record.state} after {len(record.plans)} cycles ({why})")
     print(episode.latency_table(record))
     episode.plot(record, args.png)

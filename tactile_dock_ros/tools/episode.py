@@ -21,6 +21,7 @@ from std_srvs.srv import Trigger
 from tactile_dock_ros.msg import (
     ContactHistory,
     DockingPlan,
+    EpisodeStatus,
     ExecutionReport,
     ShapeDistribution,
     ShapeSamples,
@@ -42,7 +43,7 @@ class EpisodeRecord:
     history: ContactHistory | None = None
     plans: list = field(default_factory=list)
     reports: list = field(default_factory=list)
-    status: DiagnosticStatus | None = None
+    status: EpisodeStatus | None = None
     command_speeds: list = field(default_factory=list)  # m/s of every command to the arm
     wall_seconds: float = 0.0
     messages: list = field(default_factory=list)  # (topic, receive ns, msg) for tools.bag.write
@@ -50,27 +51,32 @@ class EpisodeRecord:
 
     @property
     def state(self) -> str:
-        return self.status.message.split(":")[0] if self.status is not None else "NONE"
+        """The planner's latest state (``convert.EPISODE_STATES``), NONE before any status."""
+        return convert.episode_status_from_msg(self.status)[0] if self.status else "NONE"
 
     @property
-    def values(self) -> dict[str, str]:
-        return {kv.key: kv.value for kv in self.status.values} if self.status else {}
+    def detail(self) -> str:
+        """Why the planner entered its latest state ('' if it did not say)."""
+        return self.status.detail if self.status is not None else ""
 
     def cycles(self) -> list[dict]:
-        """Per cycle: p_dock, decision, outcome and the latencies the planner recorded."""
-        values, out = self.values, []
+        """Per cycle: p_dock, decision, outcome ('-' without a report) and the latencies the
+        planner recorded (None until it has)."""
+        recorded = convert.episode_cycles_from_msg(self.status) if self.status else []
+        out = []
         for i, plan in enumerate(self.plans, start=1):
-            cycle = {
-                "cycle": i,
-                "p_dock": plan.docking_probability,
-                "decision": "DOCK" if plan.decision == DockingPlan.DOCK else "GIVE_UP",
-                "outcome": values.get(f"cycle{i}.outcome", "-") or "-",
-            }
-            for key in ("inference_s", "planning_s", "execution_s"):
-                cycle[key] = (
-                    float(values[f"cycle{i}.{key}"]) if f"cycle{i}.{key}" in values else None
-                )
-            out.append(cycle)
+            record = recorded[i - 1] if i <= len(recorded) else {}
+            out.append(
+                {
+                    "cycle": i,
+                    "p_dock": plan.docking_probability,
+                    "decision": "DOCK" if plan.decision == DockingPlan.DOCK else "GIVE_UP",
+                    "outcome": record.get("outcome") or "-",
+                    **{
+                        key: record.get(key) for key in ("inference_s", "planning_s", "execution_s")
+                    },
+                }
+            )
         return out
 
 
@@ -90,7 +96,7 @@ class EpisodeClient(Node):
             (ShapeDistribution, "/terrain_prior", keep["prior"], qos.LATCHED),
             (ShapeDistribution, "/mock_hardware/ground_truth", keep["truth"], qos.LATCHED),
             (ContactHistory, "/contact_history", keep["history"], qos.LATCHED),
-            (DiagnosticStatus, "/episode_status", keep["status"], qos.LATCHED),
+            (EpisodeStatus, "/episode_status", keep["status"], qos.LATCHED),
             (ShapeSamples, "/shape_samples", self.record.samples.append, qos.LATCHED),
             (DockingPlan, "/plan", self.on_plan, qos.EVENTS),
             (ExecutionReport, "/execution_report", self.record.reports.append, qos.EVENTS),
@@ -152,7 +158,8 @@ class EpisodeClient(Node):
             executor,
             lambda: (
                 self.record.prior is not None
-                and self.record.values.get("prior_vertices", "0") != "0"  # the planner has it
+                and self.record.status is not None
+                and self.record.status.prior_vertices > 0  # the planner has it
                 and self.start_client.service_is_ready()
                 and self.count_publishers("plan") > 0
                 and self.count_publishers("execution_report") > 0

@@ -1,6 +1,6 @@
 """Matplotlib drawing shared by the episode figures (tools.plot, tools.episode, tools.replay).
 
-``STATUS_RGBA`` is the one colour table per observation status, also used by the RViz markers
+History segments take ``core.history.STATUS_RGBA``, the colours of the RViz markers
 (``nodes.markers``), so a figure and RViz show a history alike.
 """
 
@@ -10,15 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.history import History, Status
-
-STATUS_RGBA = {  # free green, collide red, stick purple, slip left orange, slip right gold
-    Status.FREE: (0.17, 0.63, 0.17, 1.0),
-    Status.COLLIDE: (0.84, 0.15, 0.16, 1.0),
-    Status.STICK: (0.58, 0.40, 0.74, 1.0),
-    Status.SLIP_LEFT: (1.0, 0.50, 0.05, 1.0),
-    Status.SLIP_RIGHT: (1.0, 0.84, 0.0, 1.0),
-}
+from ..core.history import STATUS_RGBA, History, Status
 
 
 def pyplot():

@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -41,7 +40,8 @@ from std_msgs.msg import Header, UInt32
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.episode import EpisodeState
-from tactile_dock_ros.msg import ContactHistory, ShapeDistribution
+from tactile_dock_ros.execution.types import PlaneFrame
+from tactile_dock_ros.msg import ContactHistory, EpisodeStatus, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import node_class
 from tactile_dock_ros.tools import bringup, fuzz_messages
@@ -88,7 +88,7 @@ def bases(now_s: int, live: dict) -> dict:
     plane, base = _header(now_s, PLANE_FRAME), _header(now_s, BASE_FRAME)
     prior = problems.get(ARGUMENTS["problem"]).prior
     seeded = _seed_state()
-    frame = convert.PlaneFrame([0.0, 0.6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    frame = PlaneFrame([0.0, 0.6, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
     camera = _header(now_s, "depth_camera")
     K = np.array([[30.0, 0.0, 15.5], [0.0, 30.0, 11.5], [0.0, 0.0, 1.0]])
     out = {
@@ -104,7 +104,7 @@ def bases(now_s: int, live: dict) -> dict:
         "/plan": fuzz_messages.valid_plan(EPISODES[-1], PROBE_PLAN + 1, plane),
         "/execution_report": fuzz_messages.valid_report(EPISODES[-1], SEED_PLANS[0], -0.3, plane),
         "/episode": UInt32(data=EPISODES[-1]),
-        "/episode_status": _status("IDLE", 0),
+        "/episode_status": convert.episode_status_to_msg(_header(now_s, ""), "IDLE", 0, "", 0, []),
         "/arm/tool_pose": convert.pose_to_msg(frame.point_from_plane([0.0, 0.45]), base),
         "/ft_sensor/wrench": convert.wrench_to_msg(np.array([0.3, -0.2, 0.5]), base),
         "/arm/cmd_twist": convert.twist_to_msg(np.zeros(3), base),
@@ -112,10 +112,6 @@ def bases(now_s: int, live: dict) -> dict:
         "/camera/depth/camera_info": convert.camera_info(K, 32, 24, camera),
     }
     return {**out, **live}
-
-
-def _status(state: str, episode: int) -> DiagnosticStatus:
-    return DiagnosticStatus(message=state, values=[KeyValue(key="episode", value=str(episode))])
 
 
 def _seed_reports(header: Header) -> list:
@@ -170,7 +166,7 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
     base = bases(now_s, {})
     live = {
         "/terrain_prior": base["/terrain_prior"],
-        "/episode_status": _status("IDLE", 0),
+        "/episode_status": base["/episode_status"],
         "/camera/depth/camera_info": base["/camera/depth/camera_info"],
     }
     for topic, msg in [*live.items(), *seed_messages(now_s)]:
@@ -232,7 +228,7 @@ class Fuzzer(Node):
         self.histories = 0  # /contact_history messages received
         watched = [
             (ContactHistory, "/contact_history", qos.LATCHED),
-            (DiagnosticStatus, "/episode_status", qos.LATCHED),
+            (EpisodeStatus, "/episode_status", qos.LATCHED),
             (ShapeDistribution, "/terrain_prior", qos.LATCHED),
             (PoseStamped, "/arm/tool_pose", qos.SENSOR),
             (WrenchStamped, "/ft_sensor/wrench", qos.SENSOR),

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import Point, Vector3
 
 from tactile_dock_ros.msg import ContactSegment, DockingPlan, ExecutionReport
@@ -261,15 +260,11 @@ def _camera_info_rows() -> list[Row]:
 
 
 def _status_rows() -> list[Row]:
-    def episode(value):
-        return lambda m, rng, ctx: setattr(m, "values", [KeyValue(key="episode", value=value)])
-
     return [
-        *[(f"episode {v!r}", True, episode(v))
-          for v in ("abc", "", "-1", "1e3", str(2**32), " 7")],
-        ("state unknown", False, _set("message", "NOT_A_STATE")),
+        ("state unknown", True, _set("state", 200)),
+        ("detail 10^6 characters", False, _set("detail", "x" * HUGE)),
         ("copy", False, lambda m, rng, ctx: None),
-    ]  # fmt: skip
+    ]
 
 
 def _episode_rows() -> list[Row]:
@@ -304,7 +299,7 @@ def table(type_name: str, frame_checked: bool) -> list[Row]:
             *_vector_rows("twist", ("linear", "angular")), *stamped],
         "sensor_msgs/msg/Image": lambda: [*_image_rows(), *stamped],
         "sensor_msgs/msg/CameraInfo": lambda: [*_camera_info_rows(), *stamped],
-        "diagnostic_msgs/msg/DiagnosticStatus": _status_rows,
+        "tactile_dock_ros/msg/EpisodeStatus": lambda: [*_status_rows(), *stamped],
         "std_msgs/msg/UInt32": _episode_rows,
     }  # fmt: skip
     return rows[type_name]()

@@ -53,7 +53,7 @@ class Cycle:
     # plan's first waypoint)
     state: EpisodeState
     samples: np.ndarray  # (N, n, 2) posterior vertices the node planned with
-    recorded: object  # nodes.convert.PlanCommand
+    recorded: object  # execution.types.PlanCommand
     outcome: str  # the executor's report for the plan ("-": none recorded)
 
 

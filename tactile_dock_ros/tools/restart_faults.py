@@ -14,8 +14,8 @@ settings and waits until the planner publishes its next plan. Measured per run:
   the restarted suite's history (bit-exact);
 * ``same_episode``: the next plan carries the episode id of before the kill;
 * planner only: ``stop_s``, from the kill to the executor's report that it stopped the arm
-  (``convert.PRODUCER_LOST``), and ``stopped``: every arm command from then until the restart
-  is zero;
+  (``execution.types.PRODUCER_LOST``), and ``stopped``: every arm command from then until the
+  restart is zero;
 * ``resume_s``: from the restart to the next plan (wall clock: startup, discovery, journal
   replay, sampling and planning on this machine).
 
@@ -103,7 +103,7 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
             ended = episode.FINAL_STATES
             wait("the second plan", lambda: len(record.plans) >= 2 or record.state in ended)
             if len(record.plans) < 2:  # e.g. a sensor timeout on a starved machine
-                why = record.status.message if record.status else "no status"
+                why = f"{record.state} {record.detail}"
                 raise RuntimeError(f"the episode ended before the fault: {why} (logs: {log_dir})")
             episode_id, killed_during = record.plans[-1].episode, record.plans[-1].plan_id
             t_plan = now()

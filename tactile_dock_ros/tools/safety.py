@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -32,7 +32,8 @@ from rclpy.node import Node
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 from std_srvs.srv import SetBool
 
-from tactile_dock_ros.msg import DockingPlan, ExecutionReport
+from tactile_dock_ros.execution.types import PlanCommand, PlaneFrame, Report
+from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import stamp_seconds
 from tactile_dock_ros.nodes.planner_node import RESEND_PERIOD
@@ -61,7 +62,7 @@ class Envelope:
     max_speed: float
     max_force: float
     force_bias: np.ndarray  # the mock's constant F/T bias, base frame (N)
-    plane: convert.PlaneFrame
+    plane: PlaneFrame
     control_period: float
     sensor_timeout: float
     filter_cutoff_hz: float  # the executor's F/T low-pass
@@ -83,9 +84,7 @@ class Envelope:
             float(executor["max_speed"]),
             float(executor["max_force"]),
             np.array(mock["force_bias"], float),
-            convert.PlaneFrame(
-                shared["plane_origin"], shared["plane_x_axis"], shared["plane_y_axis"]
-            ),
+            PlaneFrame(shared["plane_origin"], shared["plane_x_axis"], shared["plane_y_axis"]),
             1.0 / float(executor["control_rate_hz"]),
             float(executor["sensor_timeout"]),
             float(executor["filter_cutoff_hz"]),
@@ -99,7 +98,7 @@ class Recording:
     commands: list = field(default_factory=list)
     poses: list = field(default_factory=list)  # (stamp s, position (3,) m)
     wrenches: list = field(default_factory=list)  # (stamp s, force (3,) N)
-    reports: list = field(default_factory=list)  # convert.Report
+    reports: list = field(default_factory=list)  # execution.types.Report
     diagnostics: list = field(default_factory=list)  # (receive monotonic s, {key: value}, status)
 
 
@@ -112,7 +111,7 @@ class Probe(Node):
         self.episode = 0
         self.next_id = 1
         self.plan_pub = self.create_publisher(DockingPlan, "/plan", qos.EVENTS)
-        self.status_pub = self.create_publisher(DiagnosticStatus, "/episode_status", qos.LATCHED)
+        self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", qos.LATCHED)
         self.create_subscription(TwistStamped, COMMAND, self.on_command, qos.COMMAND)
         self.create_subscription(ExecutionReport, "/execution_report", self.on_report, qos.EVENTS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, qos.EVENTS)
@@ -220,7 +219,7 @@ class Probe(Node):
     def plan(self, waypoints, speed=0.2, threshold=3.0, episode=None) -> int:
         """Publish a DOCK plan (load straight down, along its last move); returns its id."""
         plan_id, self.next_id = self.next_id, self.next_id + 1
-        command = convert.PlanCommand(
+        command = PlanCommand(
             plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed,
             False, 0.5, 0.5, 0, "safety probe",
             episode=self.episode if episode is None else episode,
@@ -233,15 +232,15 @@ class Probe(Node):
         return plan_id
 
     def status(self, episode: int, state: str) -> None:
-        values = [KeyValue(key="episode", value=str(episode))]
-        self.status_pub.publish(DiagnosticStatus(message=state, values=values))
+        header = convert.Header(stamp=self.get_clock().now().to_msg())
+        self.status_pub.publish(convert.episode_status_to_msg(header, state, episode, "", 0, []))
         self.episode = episode
 
     def wait_episode(self, expected: str, timeout_s: float = 10.0) -> bool:
         """Until the executor's diagnostics report ``expected`` as its episode."""
         return self.spin_until(lambda: self.diagnostics().get("episode") == expected, timeout_s)
 
-    def report(self, plan_id: int, timeout_s: float = 30.0) -> convert.Report | None:
+    def report(self, plan_id: int, timeout_s: float = 30.0) -> Report | None:
         def found() -> list:
             return [r for r in self.rec.reports if r.plan_id == plan_id]
 
@@ -376,7 +375,7 @@ def _superseded(probe: Probe, start) -> int:
 
 def _ended(probe: Probe, start) -> int:
     _set_episode(probe, 9, "RUNNING")
-    _set_episode(probe, 9, "ABORTED: test")
+    _set_episode(probe, 9, "ABORTED")
     return probe.plan([start, [0.0, -0.1]])
 
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tactile_dock_ros.core.geometry2d import cross, outward_normal
+
 _EPS = 1e-9  # slack on segment parameters, dimensionless
 
 
@@ -51,7 +53,7 @@ class PointToolSim:
         keep = length > 0
         self.c, self.d, length = self.c[keep], self.d[keep], length[keep]
         self.tangent = (self.d - self.c) / length[:, None]
-        self.normal = np.stack([self.tangent[:, 1], -self.tangent[:, 0]], axis=1)
+        self.normal = outward_normal(self.tangent)
         self.friction, self.stiffness, self.lateral = float(friction), float(stiffness), lateral
         self.max_slide_speed = float(max_slide_speed)
         self.direction = np.array([1.0, 0.0])
@@ -77,11 +79,11 @@ class PointToolSim:
         """
         r = q - p
         e = self.d - self.c
-        denom = r[0] * e[:, 1] - r[1] * e[:, 0]
+        denom = cross(r, e)
         w = self.c - p
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / denom
-            u = (w[:, 0] * r[1] - w[:, 1] * r[0]) / denom
+            t = cross(w, e) / denom
+            u = cross(w, r) / denom
         entering = (self.normal @ r) < 0
         ok = entering & (np.abs(denom) > 1e-15) & (t >= -_EPS) & (t <= 1 + _EPS)
         ok &= (u >= -_EPS) & (u <= 1 + _EPS)

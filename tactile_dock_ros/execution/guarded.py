@@ -24,10 +24,11 @@ Decisions where the paper leaves the robot side open:
   ``core.simulate``) or the slide exceeds ``max_slide``.
   The evidence is that of ``core.explore``'s simulated robot: the status of the first contact
   (the slip), even when the slide then sticks, and after a slide that ended in separation one
-  more slip observation at the middle of every edge the trace crossed completely toward the
-  slip's side (``crossed_pieces``). A finite lateral stiffness pulls back as the tool
-  slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may stop on a slope that the
-  paper's ideal compliance would slide down; the test reports the hold the arm actually has.
+  more slip observation for every edge the trace crossed completely toward the slip's side
+  (``crossed_pieces``, ``core.slides.crossed_piece_evidence``). A finite lateral stiffness
+  pulls back as the tool slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may
+  stop on a slope that the paper's ideal compliance would slide down; the test reports the hold
+  the arm actually has.
 * Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
   move, backed off by the contact resolution w from the contact point c, and a contact segment
   c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
@@ -46,8 +47,10 @@ from enum import Enum
 
 import numpy as np
 
+from tactile_dock_ros.core import slides
+from tactile_dock_ros.core.geometry2d import cross, perp
 from tactile_dock_ros.core.history import History, Status
-from tactile_dock_ros.nodes.convert import PlanCommand
+from tactile_dock_ros.execution.types import Outcome, PlanCommand
 
 
 @dataclass(frozen=True)
@@ -78,15 +81,6 @@ class Settings:
     time_margin: float = 5.0  # time budget = 3 * path length / speed + margin
     settle_time: float = 0.3  # a compliant slide is stuck after holding still this long
     max_slide: float = 0.3  # a compliant slide longer than this fails
-
-
-class Outcome(Enum):
-    """Values equal the ExecutionReport constants."""
-
-    DOCKED = 0
-    CONTACT_FAILED = 1
-    NO_CONTACT = 2
-    ABORTED = 3
 
 
 class _Phase(Enum):
@@ -262,8 +256,7 @@ class GuardedRun:
         d = self._direction()
         moved = tool - self._anchor
         if np.linalg.norm(moved) > self.settings.slip_tolerance:
-            cross = d[0] * moved[1] - d[1] * moved[0]
-            status = Status.SLIP_LEFT if cross > 0 else Status.SLIP_RIGHT
+            status = Status.SLIP_LEFT if cross(d, moved) > 0 else Status.SLIP_RIGHT
             if self.plan.compliant:
                 self._phase, self._slip, self._still = _Phase.SLIDE, status, (tool.copy(), self._t)
                 return self._step_slide(tool, force)
@@ -281,7 +274,7 @@ class GuardedRun:
         how = f"slid {slid:.3f} m {self._slip.name.lower().replace('slip_', '')}"
         rest, since = self._still
         moved = tool - rest
-        across = abs(d[0] * moved[1] - d[1] * moved[0])
+        across = abs(cross(d, moved))
         # Moving straight along the load, little of the force resisting it: free space, or a
         # surface parallel to the load (a wall the arm's lateral spring presses against).
         free = (
@@ -293,11 +286,12 @@ class GuardedRun:
             self._record_contact(self._anchor, d, self._slip)
             if free:  # the trace up to the rest point ended at the vertex it slid off
                 trace = np.array([self._anchor, *self._trace, rest])
-                left = np.array([-d[1], d[0]])  # the side a SLIP_LEFT slide moves to
+                left = perp(d)  # the side a SLIP_LEFT slide moves to
                 side = left if self._slip == Status.SLIP_LEFT else -left
-                pieces = crossed_pieces(trace, self.settings.contact_resolution, side)
-                for middle in pieces:
-                    self._record_contact(middle, d, self._slip)
+                w = self.settings.contact_resolution
+                pieces = crossed_pieces(trace, w, side)
+                evidence = slides.crossed_piece_evidence(*pieces, d, w, self._slip)
+                self._segments += zip(evidence.a, evidence.b, evidence.status, strict=True)
             why = "lost contact" if free else "exceeded max_slide"
             return self._start_retreat(tool, f"{how} and {why} under the load")
         if across > self.settings.slip_tolerance or moved @ d < -self.settings.slip_tolerance:
@@ -342,8 +336,10 @@ class GuardedRun:
         self._phase = _Phase.DONE
 
 
-def crossed_pieces(trace: np.ndarray, resolution: float, side: np.ndarray) -> np.ndarray:
-    """Middles (k, 2) of the straight pieces of a slide trace (n, 2) after its first piece.
+def crossed_pieces(
+    trace: np.ndarray, resolution: float, side: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and ends (k, 2) of the straight pieces of a slide trace (n, 2) after its first.
 
     The trace's corners (Douglas-Peucker, tolerance ``resolution`` / 4) are where the surface
     turned; the first piece covers only part of the first contacted edge (its evidence is the
@@ -353,8 +349,9 @@ def crossed_pieces(trace: np.ndarray, resolution: float, side: np.ndarray) -> np
     side): sliding under the load, the tool moves that way along every edge that faces the
     load and slips like the first contact (eq. 12); a piece that does not is a wall or an
     undercut the arm's lateral stiffness pulled the tool along after it passed the lip, and
-    would be false evidence. This is the evidence ``core.explore.slide_evidence`` gives the
-    simulated robot, from the robot's own trace. The loop pops at most one split per trace point.
+    would be false evidence. These are the pieces ``core.explore.slide_evidence`` takes from
+    the simulated robot's ground truth, read off the robot's own trace. The loop pops at most
+    one split per trace point.
     """
     keep, stack = {0, len(trace) - 1}, [(0, len(trace) - 1)]
     while stack:
@@ -374,7 +371,7 @@ def crossed_pieces(trace: np.ndarray, resolution: float, side: np.ndarray) -> np
     corners = trace[sorted(keep)]
     a, b = corners[1:-1], corners[2:]
     usable = (np.linalg.norm(b - a, axis=1) >= resolution) & ((b - a) @ side > 0)
-    return (0.5 * (a + b))[usable]
+    return a[usable], b[usable]
 
 
 class ForceFilter:
