@@ -10,7 +10,7 @@ from ros_helpers import spin_until
 from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 
 from tactile_dock_ros.execution.types import PRODUCER_LOST, PlanCommand, Report
-from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.nodes import convert, executor_node, qos
 
 pytestmark = pytest.mark.dds
 
@@ -83,6 +83,25 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     third = convert.report_from_msg(reports[2])
     assert third.plan_id == 4 and third.outcome == ExecutionReport.ABORTED
     assert "sensor timeout" in third.detail
+
+
+def test_executor_remembers_a_bounded_number_of_plans(tmp_path):
+    """Resent copies are recognised by (plan id, stamp); the memory keeps the newest
+    SEEN_PLANS keys, and an evicted plan's copy is still dropped (plan-id order)."""
+    spec = launch_nodes("mock")["executor"]
+    with node_with_driver(spec, tmp_path) as (node, _driver, _executor):
+        messages = [_plan_msg(plan_id, [[0.0, 0.3], [0.0, 0.1]]) for plan_id in range(1, 71)]
+        for message in messages:
+            message.decision = DockingPlan.GIVE_UP  # handled, nothing runs
+            message.waypoints = message.waypoints[:1]
+            node.on_plan(message)
+        assert len(node.seen_plans) == executor_node.SEEN_PLANS
+        newest = messages[-1]
+        assert (newest.plan_id, newest.header.stamp.sec, newest.header.stamp.nanosec) in (
+            node.seen_plans
+        )
+        with pytest.raises(convert.MessageError, match="after its plan 70"):
+            node.on_plan(messages[0])
 
 
 @pytest.mark.parametrize(

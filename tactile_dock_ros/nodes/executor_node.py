@@ -46,6 +46,9 @@ def _tuning(name: str, *spec) -> Param:
     return Param(name, getattr(Settings, name), *spec)
 
 
+SEEN_PLANS = 64  # plan keys remembered to ignore resent copies
+
+
 PARAMS = [
     *PLANE_TABLE,
     Param("control_rate_hz", 100.0, "guarded-move control rate", "Hz", 1.0, 1000.0),
@@ -125,7 +128,9 @@ class ExecutorNode(Node):
         self.gate = EpisodeGate()
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
-        self.seen_plans: set[tuple[int, int, int]] = set()  # (plan_id, stamp) already handled
+        # (plan_id, stamp) already handled, oldest first; only the last SEEN_PLANS are kept
+        # (copies of a plan arrive while it runs and shortly after; older ones meet the gate)
+        self.seen_plans: dict[tuple[int, int, int], None] = {}
         self.last_plan = (0, 0)  # (episode, plan_id) of the newest plan accepted
         self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the run plan
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
@@ -181,7 +186,9 @@ class ExecutorNode(Node):
         if admission is Admission.WAIT:  # not marked seen: a copy after the status may run
             raise convert.MessageError(f"plan {plan.plan_id} of episode {plan.episode}: {why}")
         self.check_order(plan)
-        self.seen_plans.add(key)
+        self.seen_plans[key] = None
+        if len(self.seen_plans) > SEEN_PLANS:
+            del self.seen_plans[next(iter(self.seen_plans))]
         if not plan.dock:
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
