@@ -21,6 +21,7 @@ setup(
         "tactile_dock_ros.execution",
         "tactile_dock_ros.perception",
         "tactile_dock_ros.tools",
+        "tactile_dock_ros.tools.bench",
     ],
     install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0", "pyyaml>=6.0"],
     extras_require={

@@ -65,7 +65,7 @@ def test_bad_arguments_are_rejected(bad):
 
 
 def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
-    from tactile_dock_ros.tools import bench_docking
+    from tactile_dock_ros.tools.bench import docking as bench_docking
 
     real, calls = bench_docking._episode, []
 

@@ -4,7 +4,8 @@ import pytest
 from std_msgs.msg import Header
 
 from tactile_dock_ros.nodes import convert
-from tactile_dock_ros.tools import bench, bench_episode
+from tactile_dock_ros.tools import bench
+from tactile_dock_ros.tools.bench import episode as bench_episode
 from tactile_dock_ros.tools.episode import EpisodeRecord
 
 

@@ -11,7 +11,7 @@ from tactile_dock_ros.perception.mock_camera import (
     depth_prior,
     draw_calibration_error,
 )
-from tactile_dock_ros.tools.bench_docking import PERCEPTION_CONFIG
+from tactile_dock_ros.tools.bench.docking import PERCEPTION_CONFIG
 
 CONFIG = PerceptionConfig.load(PERCEPTION_CONFIG)
 

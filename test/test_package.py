@@ -190,7 +190,9 @@ def test_setup_py_installs_every_subpackage_but_the_nodes():
     """`pip install .` gives the ROS-free layers and the tools; the rclpy nodes need the ROS
     build (CMakeLists.txt installs the whole tree)."""
     root = REPO_ROOT / "tactile_dock_ros"
-    subpackages = {p.parent.name for p in root.glob("*/__init__.py")} - {"nodes"}
+    subpackages = {
+        ".".join(p.parent.relative_to(root).parts) for p in root.glob("**/__init__.py")
+    } - {"", "nodes"}
     expected = {"tactile_dock_ros", *(f"tactile_dock_ros.{name}" for name in subpackages)}
     assert set(_setup_args()["packages"]) == expected
     assert {f"tactile_dock_ros.{layer}" for layer in ROS_FREE} <= expected

@@ -19,7 +19,7 @@ from tactile_dock_ros.perception.render import render_depth
 from tactile_dock_ros.perception.slicing import band_points, extract_slice, profile_from_points
 from tactile_dock_ros.perception.surface import ray_sigma, surface_columns
 from tactile_dock_ros.perception.terrain_prior import perceive
-from tactile_dock_ros.tools import bench_prior
+from tactile_dock_ros.tools.bench import prior as bench_prior
 
 CONFIG = PerceptionConfig.load(bench_prior.MOCK_CONFIG)
 K = bench_prior.mock_intrinsics()

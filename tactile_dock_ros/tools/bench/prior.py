@@ -24,14 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import problems
-from ..perception import evaluation, scenes
-from ..perception.config import PerceptionConfig, PerceptionError
-from ..perception.depth import decode_depth, encode_depth
-from ..perception.render import render_depth
-from ..perception.terrain_prior import perceive
+from ...core import problems
+from ...perception import evaluation, scenes
+from ...perception.config import PerceptionConfig, PerceptionError
+from ...perception.depth import decode_depth, encode_depth
+from ...perception.render import render_depth
+from ...perception.terrain_prior import perceive
 
-MOCK_CONFIG = Path(__file__).resolve().parents[2] / "config" / "perception_mock.yaml"
+MOCK_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
 IMAGE = (320, 240)
 FOCAL_PX = 262.5
 COVERAGE_SPACING_M = 0.01

@@ -12,13 +12,13 @@ import time
 
 import numpy as np
 
-from ..perception import evaluation, scenes
-from ..perception.bridge import sample_truncated_gaussian
-from ..perception.config import Extrinsic, PerceptionConfig
-from ..perception.depth import decode_depth, encode_depth
-from ..perception.render import render_depth
-from ..perception.slicing import extract_slice
-from ..perception.terrain_prior import build_prior
+from ...perception import evaluation, scenes
+from ...perception.bridge import sample_truncated_gaussian
+from ...perception.config import Extrinsic, PerceptionConfig
+from ...perception.depth import decode_depth, encode_depth
+from ...perception.render import render_depth
+from ...perception.slicing import extract_slice
+from ...perception.terrain_prior import build_prior
 
 TARGET_SLICE_S = 0.020
 TARGET_TOTAL_S = 0.200

@@ -16,8 +16,8 @@ import time
 import numpy as np
 from scipy.stats import multivariate_normal
 
-from ..core import bvn, problems, probsim, simulate
-from ..core.geometry2d import outward_normal
+from ...core import bvn, problems, probsim, simulate
+from ...core.geometry2d import outward_normal
 
 
 def _positive(text: str) -> int:

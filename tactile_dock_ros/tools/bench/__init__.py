@@ -2,7 +2,7 @@
 
     python -m tactile_dock_ros.tools.bench SUITE [--json OUT] [--repeats R] [--seed S] [...]
 
-Each suite is a module ``tactile_dock_ros.tools.bench_<suite>`` (or as ``MODULES`` says) with
+Each suite is a module ``tactile_dock_ros.tools.bench.<suite>`` (or as ``MODULES`` says) with
 ``add_arguments(parser)`` and ``run(args) -> dict``; ``run`` prints a human-readable table as
 it goes and returns the JSON-serializable results, which are written to ``--json`` (and always
 include the command line, the machine and the software versions). BLAS runs single-threaded unless
@@ -37,7 +37,7 @@ SUITES = {
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
 }
 
-MODULES = {"fuzz": "tactile_dock_ros.tools.fuzz"}  # suites not named bench_<suite>
+MODULES = {"fuzz": "tactile_dock_ros.tools.fuzz"}  # suites not in this package
 
 
 def _environment() -> dict:
@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="suite", required=True, metavar="SUITE")
     modules = {}
     for name, help_text in SUITES.items():
-        module = importlib.import_module(MODULES.get(name, f"tactile_dock_ros.tools.bench_{name}"))
+        module = importlib.import_module(MODULES.get(name, f"tactile_dock_ros.tools.bench.{name}"))
         suite_parser = sub.add_parser(name, help=help_text, description=module.__doc__)
         suite_parser.add_argument("--json", type=Path, help="write the results to this file")
         suite_parser.add_argument("--repeats", type=int, default=3, help="repetitions (median)")
@@ -78,7 +78,3 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps(report, indent=2, default=float))
         print(f"wrote {args.json}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

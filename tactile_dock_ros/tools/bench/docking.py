@@ -32,14 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import explore, problems, simulate
-from ..core.shape import GaussianShape
-from ..perception.config import PerceptionConfig, PerceptionError
-from ..perception.mock_camera import depth_prior
+from ...core import explore, problems, simulate
+from ...core.shape import GaussianShape
+from ...perception.config import PerceptionConfig, PerceptionError
+from ...perception.mock_camera import depth_prior
 
 PRIORS = ("problem", "depth")
 MODES = ("compliant", "non-compliant")
-PERCEPTION_CONFIG = Path(__file__).resolve().parents[2] / "config" / "perception_mock.yaml"
+PERCEPTION_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
 
 
 def _at_least(minimum: int):
