@@ -77,20 +77,27 @@ def test_shortest_path_avoids_obstacles_and_is_no_longer_than_detour():
 
 def test_a_tool_on_the_outline_leaves_the_way_it_came():
     """On the mean outline ``ascend`` has no direction; ``retrace`` walks the tool's own free
-    moves back out of the likely-obstacle region."""
+    moves back out of the likely-obstacle region, from the end of the last free move (the core
+    loop) or from a point the executor retreated to along it."""
     block = shapely.box(-1.0, -1.0, 1.0, 1.0)
-    start = np.array([0.0, 1.0])  # on the mean outline's top edge
-    space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, start)
-    assert space.ascend(start, 0.05) is None
+    outline = np.array([[1.0, 1.0], [-1.0, 1.0]])
+    space = FreeSpace(block, outline, False, np.array([0.0, 1.0]))
+    assert space.ascend(np.array([0.0, 1.0]), 0.05) is None  # on the outline
     history = History(
-        [[3.0, 3.0], [0.0, 2.0], [0.0, 1.5], [0.0, 1.0]],
-        [[3.0, 2.5], [0.0, 1.5], [0.0, 1.0], [0.0, 0.95]],
-        [Status.FREE, Status.FREE, Status.FREE, Status.COLLIDE],
+        [[3.0, 3.0], [0.0, 2.0], [0.0, 1.5], [0.5, 0.98], [0.0, 0.97]],
+        [[3.0, 2.5], [0.0, 1.5], [0.0, 0.97], [0.5, 0.9], [0.0, 0.95]],
+        [Status.FREE, Status.FREE, Status.FREE, Status.FREE, Status.COLLIDE],
     )
-    path = planner.retrace(history, start, space, 0.05)
-    np.testing.assert_allclose(path, [[0.0, 1.0], [0.0, 1.5]])
-    assert planner.retrace(History(), start, space, 0.05) is None
-    assert planner.retrace(history.subset(np.array([0, 3])), start, space, 0.05) is None
+    for start in ([0.0, 0.97], [0.0, 0.99], [0.003, 0.985], [0.02, 0.96]):  # the last: retreated
+        path = planner.retrace(history, np.array(start), space, 0.005)
+        np.testing.assert_allclose(path[[0, -1]], [start, [0.0, 1.5]])
+        assert len(path) <= 3 and np.allclose(path[1:, 0], 0.0)  # then along move 3
+    deep = History([[0.0, 2.0], [0.0, 0.9]], [[0.0, 0.9], [0.0, 0.5]], [Status.FREE] * 2)
+    path = planner.retrace(deep, np.array([0.0, 0.5]), space, 0.005)  # (0, 0.9) is blocked
+    np.testing.assert_allclose(path, [[0.0, 0.5], [0.0, 0.9], [0.0, 2.0]])
+    assert planner.retrace(History(), np.array([0.0, 0.97]), space, 0.005) is None
+    assert planner.retrace(history, np.array([-0.5, 0.9]), space, 0.005) is None  # off every move
+    assert planner.retrace(history, np.array([0.3, 0.5]), space, 0.005) is None  # too far
 
 
 @pytest.mark.parametrize("name", problems.names())

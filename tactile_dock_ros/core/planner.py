@@ -86,26 +86,40 @@ class Plan:
     rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
 
 
+RETRACE_REACH = 0.05  # m: the executor's retreat (0.02 m) plus margin (``retrace``)
+
+
 def retrace(
     history: History, start: np.ndarray, space: FreeSpace, step: float
 ) -> np.ndarray | None:
     """Path (L, 2) from ``start`` back along the tool's own free moves to a point outside the
     likely-obstacle region, or None.
 
-    Decision: after a contact the tool rests at the end of its last free segment, which the
-    posterior's margin often covers; when ``FreeSpace.ascend`` finds no way out (the tool sits
-    on the mean outline), the tool leaves the way it came: free observations are recorded in
-    move order and each starts where the previous one ended, so walking them backwards from
-    the one ending at ``start`` retraces space the tool has crossed (no sample consistent with
-    the history intersects it). Not a hot path: one walk over the history per plan.
+    Decision: after a contact the tool rests near its last free segments (the core loop: at
+    the end of the last one; the executor: after its retreat, 0.02 m by default, which is not
+    recorded), where the posterior's margin often covers it; when ``FreeSpace.ascend`` finds
+    no way out (the tool sits on the mean outline), the tool leaves the way it came. It steps
+    to the nearest point of the latest free observation within RETRACE_REACH metres (undoing
+    the retreat), follows it back to its start, then earlier ones each ending within ``step``
+    of where the walk stands (free observations are recorded in move order, each starting
+    where the previous one ended): space the tool has crossed, which no sample consistent with
+    the history intersects. Not a hot path: one walk over the history per plan.
     """
     free = np.flatnonzero(np.asarray(history.status) == Status.FREE)
-    path = [np.asarray(start, float)]
-    for k in free[::-1]:
-        if np.linalg.norm(history.b[k] - path[-1]) > 0.5 * step:
+    a, b = history.a[free], history.b[free]
+    start = np.asarray(start, float)
+    along = b - a
+    t = np.sum((start - a) * along, axis=1) / np.maximum(np.sum(along**2, axis=1), 1e-18)
+    nearest = a + np.clip(t, 0.0, 1.0)[:, None] * along
+    near = np.flatnonzero(np.linalg.norm(nearest - start, axis=1) <= RETRACE_REACH)
+    if near.size == 0:
+        return None
+    path = [start] if np.allclose(nearest[near[-1]], start) else [start, nearest[near[-1]]]
+    for k in range(near[-1], -1, -1):
+        if k < near[-1] and np.linalg.norm(b[k] - path[-1]) > step:
             continue
-        path.append(np.asarray(history.a[k], float))
-        if not space.blocked(path[-1])[0]:
+        path.append(a[k])
+        if not space.blocked(a[k])[0]:
             return np.array(path)
     return None
 
