@@ -400,7 +400,7 @@ def _picked_violated(system, coef, mids, pick) -> np.ndarray:
     return out
 
 
-def _descent_step(system, z, pick, d, rng) -> np.ndarray:
+def _descent_step(system, z, pick, d, count_now, rng) -> np.ndarray:
     """One coordinate step of ``random_descent``: states z (C, m) moved along directions d.
 
     The line is cut at every primitive root within the conditional mean +- DESCENT_HALF_WIDTH
@@ -432,7 +432,7 @@ def _descent_step(system, z, pick, d, rng) -> np.ndarray:
     powers = np.stack([np.ones_like(t), t, t * t], axis=-1)
     count = np.sum(system.violations(np.matmul(powers, coef.swapaxes(1, 2))) > 0, axis=-1)
     count = np.where(np.isfinite(np.take_along_axis(score, cand, 1)), count, np.iinfo(int).max)
-    count[:, -1] = np.sum(system.violations(system.values(z)) > 0, axis=-1)
+    count[:, -1] = count_now  # the current segment: the rows' violated counts at t = 0
     best = np.zeros(mids.shape, dtype=bool)
     rows = np.repeat(np.arange(len(z)), cand.shape[1])
     best[rows, cand.ravel()] = (count == count.min(axis=1, keepdims=True)).ravel()
@@ -469,7 +469,7 @@ def random_descent(
         axis = np.argmax(cum >= rng.random((todo.size, 1)) * cum[:, -1:], axis=1)
         d = np.zeros((todo.size, m))
         d[np.arange(todo.size), axis] = 1.0
-        z[todo] = _descent_step(system, z[todo], pick, d, rng)
+        z[todo] = _descent_step(system, z[todo], pick, d, count[todo], rng)
         count[todo] = _violated_count(system, z[todo])
     return z, count
 
