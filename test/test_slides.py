@@ -66,6 +66,25 @@ def test_rows_the_sampler_dropped_or_that_land_nowhere_do_not_judge_a_sample():
     assert ok.tolist() == [True, True]
 
 
+def test_a_slide_that_separated_rules_out_a_trap_after_its_last_row():
+    slope = slope_shape()
+    history = slide_probes(slope, [3, 2])  # the tool then slid on and fell off the end
+    ends_level = level_edge(slope, 0)  # would trap it at vertex 1: it would have docked
+    ends_steep = slope.copy()
+    ends_steep[0] = slope[1] + [0.0, -STEP]  # a wall below vertex 1: it separates there
+    overhang = slope.copy()
+    overhang[0] = slope[1] + [-STEP, -STEP]  # turns back under the slope: separates
+    samples = np.stack([slope, ends_level, ends_steep, overhang])
+    ok = slides.consistent_with_slides(samples, False, history, [4, 4], LOAD, MU)
+    assert ok.tolist() == [True, False, True, True]
+    # a closed shape: the walk wraps past the first vertex to the trap
+    closed = np.vstack([ends_level, [[slope[-1, 0], -1.0], [0.2, -1.0], [0.2, 0.0]]])
+    for roll in range(len(closed)):
+        rolled = np.roll(closed, roll, axis=0)
+        ok = slides.consistent_with_slides(rolled[None], True, history, [4, 4], LOAD, MU)
+        assert not ok[0], roll
+
+
 def test_a_slide_that_runs_backwards_fails():
     slope = slope_shape()
     backwards = slide_probes(slope, [1, 3])  # the first contact below the later one
@@ -117,7 +136,10 @@ def test_the_truth_always_passes_its_own_slides(truth_seed, x):
     ok = slides.consistent_with_slides(
         truth[None], False, evidence, np.ones(len(evidence)), problem.load, problem.friction
     )
-    assert ok[0]
+    # A slide is evidence of a move that did not dock (a docked episode ends); one that ended
+    # trapped at a vertex contradicts that, so the check must refuse it.
+    trapped = run.docked and run.stop_feature is not None and run.stop_feature.kind == "vertex"
+    assert ok[0] == (not (trapped and slides.slide_groups(evidence, np.ones(len(evidence)))))
 
 
 def test_planner_drops_the_samples_a_slide_rules_out():

@@ -117,8 +117,31 @@ def consistent_with_slides(
         along = step * (np.arange(count)[None, :] - h[:, :1])
         if closed:
             along %= count
-        span = (along >= 0) & (along <= offset.max(axis=1, keepdims=True))
+        reach = offset.max(axis=1, keepdims=True)
+        span = (along >= 0) & (along <= reach)
         carries = faces & (slip_right if step > 0 else slip_left)
         fails = np.any(offset < 0, axis=1) | np.any(span & ~carries, axis=1)
-        ok &= ~(hit[:, 0] & fails)
+        ok &= ~(hit[:, 0] & (fails | _traps_after(along, reach, carries, faces, closed)))
     return ok
+
+
+def _traps_after(along, reach, carries, faces, closed: bool) -> np.ndarray:
+    """(N,) whether the slide, carried on past its farthest row, would have stuck at a vertex.
+
+    A slide is recorded as a group only when it ended by separating (``explore.slide_evidence``
+    and ``execution.guarded`` give the crossed pieces only then; the move did not dock). Past
+    the farthest row's edge the tool goes on over the edges that carry it, up to the first
+    edge that does not: if that edge faces the load the tool would have been trapped at the
+    vertex before it (docked, Sec. V-A2), which did not happen; a sample that says so fails.
+    A walk off an open polyline's end is a separation. ``along`` (N, E) counts edges from the
+    first contact's edge in the slide direction (modulo E when ``closed``), ``reach`` (N, 1)
+    the farthest row's count.
+    """
+    count = along.shape[1]
+    beyond = np.where(along > reach, along - reach, count + 1)
+    if not closed:
+        beyond = np.where(along >= 0, beyond, count + 1)
+    beyond = np.where(carries, count + 1, beyond)
+    first = beyond.argmin(axis=1)
+    rows = np.arange(len(first))
+    return (beyond[rows, first] <= count) & faces[rows, first]
