@@ -39,7 +39,7 @@ def test_plan_is_free_then_loads_through_target_edge(name):
     posterior = GaussianShape.from_samples(samples, problem.prior.closed, problem.friction)
     whole = probsim.dock_probability(posterior, plan.path, problem.load)
     holding = planner.holding_frequencies(samples, False, problem.load, problem.friction)
-    expected = planner.capped_p_dock(whole.p_stop_vertex, whole.p_stop_edge, holding)
+    expected = planner.capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding)
     assert plan.p_dock == pytest.approx(expected, rel=1e-9, abs=1e-12)
     assert plan.p_dock <= whole.p_dock + 1e-12  # the cap only removes probability
     assert plan.p_dock >= plan.candidates.p_dock.max() * 0.5  # prefix rarely touches anything
@@ -119,16 +119,20 @@ def test_holding_frequencies_match_the_simulated_contacts(name):
         )
         stuck = outcome == simulate.STUCK_VERTEX
         for v in np.unique(vertex[stuck]):
-            assert q_vertex[v] >= np.mean(stuck & (vertex == v)) - 1e-12
-    assert np.all((q_edge >= 0) & (q_edge <= 1)) and q_vertex[0] == q_vertex[-1] == 0.0
+            side = 0 if v <= e else 1  # arrived by a left slide (toward lower indices) or right
+            assert q_vertex[side, v] >= np.mean(stuck & (vertex == v)) - 1e-12
+    assert np.all((q_edge >= 0) & (q_edge <= 1)) and np.all(q_vertex[:, [0, -1]] == 0.0)
 
 
 def test_cap_removes_features_no_sample_lets_hold():
-    stop_vertex = np.array([[0.1, 0.2, 0.0]])
+    stop_vertex = np.array([[[0.1, 0.2, 0.0], [0.0, 0.03, 0.0]]])  # (1 move, 2 arrivals, 3)
     stop_edge = np.array([[0.3, 0.05]])
-    holding = (np.array([0.0, 0.5]), np.array([0.0, 0.01, 0.0]))
+    holding = (np.array([0.0, 0.5]), np.array([[0.0, 0.01, 0.0], [0.0, 0.5, 0.0]]))
     capped = planner.capped_p_dock(stop_vertex, stop_edge, holding)
-    assert capped == pytest.approx([0.05 + 0.01])
+    assert capped == pytest.approx([0.05 + 0.01 + 0.03])
+    # a vertex that traps only slides from its other side: a left slide's stop there counts 0
+    one_sided = (holding[0], np.array([[0.0, 0.0, 0.0], [0.0, 0.5, 0.0]]))
+    assert planner.capped_p_dock(stop_vertex, stop_edge, one_sided) == pytest.approx([0.08])
 
 
 def test_no_edge_facing_the_load_gives_up():

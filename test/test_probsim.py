@@ -94,6 +94,8 @@ def test_deterministic_shape_gives_exact_limits():
     comp = probsim.dock_probability(slope, [[0.5, 2.0], [0.5, 0.0]], DOWN, compliant=True)
     rigid = probsim.dock_probability(slope, [[0.5, 2.0], [0.5, 0.0]], DOWN, compliant=False)
     assert comp.p_dock == 1.0 and comp.p_stop_vertex.tolist() == [0.0, 1.0, 0.0]
+    # it arrived at vertex 1 by a right slide (along l(v), toward the edge's last vertex)
+    assert comp.p_stop_vertex_sides.tolist() == [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     assert rigid.p_dock == 0.0
 
 

@@ -203,13 +203,15 @@ def terminal_segments(
 
 
 def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float):
-    """Fraction of posterior samples in which each edge (E,) / vertex (n,) can hold the load.
+    """Fraction of posterior samples in which each edge (E,) / vertex (2, n) can hold the load.
 
-    An edge holds when it faces the load and slips neither way (eq. 12); a vertex traps when a
-    slide can arrive on one side and the edge on the other side faces the load without carrying
-    the slide on (Sec. V-A2): l(v) slips right and r(v) does not, or r(v) slips left and l(v)
-    does not. Polyline ends never trap. These are eq. (19)'s sample estimates of the events
-    P(F holds), over samples that satisfy every history constraint exactly.
+    An edge holds when it faces the load and slips neither way (eq. 12); a vertex traps a
+    slide arriving on one side when the edge on the other side faces the load without carrying
+    the slide on (Sec. V-A2): row 0, a left slide along r(v) and l(v) does not slip left; row 1,
+    a right slide along l(v) and r(v) does not slip right (the rows of
+    ``probsim.DockEstimate.p_stop_vertex_sides``). Polyline ends never trap. These are eq.
+    (19)'s sample estimates of the events P(F holds), over samples that satisfy every history
+    constraint exactly.
     """
     n = samples.shape[1]
     edges, left, right = simulate.edge_index_arrays(n, closed)
@@ -220,27 +222,30 @@ def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float
     pad = np.zeros((len(samples), 1), dtype=bool)  # edge index -1 (missing neighbour)
     sl, sr, fa = (np.hstack([x, pad]) for x in (slip_left, slip_right, faces))
     ends = (left < 0) | (right < 0)
-    trap = (sr[:, left] & fa[:, right] & ~sr[:, right]) | (
-        sl[:, right] & fa[:, left] & ~sl[:, left]
+    trap = np.stack(
+        [sl[:, right] & fa[:, left] & ~sl[:, left], sr[:, left] & fa[:, right] & ~sr[:, right]],
+        axis=1,
     )
     return holds.mean(axis=0), np.where(ends, 0.0, trap.mean(axis=0))
 
 
 def capped_p_dock(stop_vertex, stop_edge, holding) -> np.ndarray:
-    """P_dock (...,) from probsim's stop distributions, each feature's term capped at the sample
-    frequency of that feature holding the load (``holding_frequencies``).
+    """P_dock (...,) from probsim's stop distributions (``stop_vertex`` (..., 2, n) by arrival,
+    ``stop_edge`` (..., E)), each feature's term capped at the sample frequency of that feature
+    holding the load (``holding_frequencies``).
 
     Decision (the paper uses one estimator): P(stop at F) <= P(F holds), and the posterior
     samples satisfy the history constraints exactly while probsim's moment-fit Gaussian does
     not (a slip observation leaves the slipped edge a few per cent of sticking under the fit).
     The cap removes such features; a feature no sample lets hold counts zero (resolution 1/N,
-    as in eq. 19). Mass removed from a feature is not passed on down the slide.
+    as in eq. 19). A vertex is two features, one per side a slide arrives from: a slide that
+    the samples all carry over a vertex (``slides``: it separated there) must not keep the trap
+    that a slide from the other side would meet. Mass removed from a feature is not passed on
+    down the slide.
     """
     q_edge, q_vertex = holding
-    total = np.minimum(stop_edge, q_edge).sum(axis=-1) + np.minimum(stop_vertex, q_vertex).sum(
-        axis=-1
-    )
-    return np.clip(total, 0.0, 1.0)
+    edges = np.minimum(stop_edge, q_edge).sum(axis=-1)
+    return np.clip(edges + np.minimum(stop_vertex, q_vertex).sum(axis=(-2, -1)), 0.0, 1.0)
 
 
 def evaluate(
@@ -260,7 +265,7 @@ def evaluate(
     )
     if holding is not None:
         p_dock = capped_p_dock(stop_vertex, stop_edge, holding)
-    stops = np.hstack([stop_vertex, stop_edge])
+    stops = np.hstack([stop_vertex.sum(axis=1), stop_edge])
     outcome = np.clip(np.hstack([stops, 1.0 - stops.sum(axis=1, keepdims=True)]), 0.0, 1.0)
     entropy = -np.sum(outcome * np.log(np.where(outcome > 0, outcome, 1.0)), axis=1)
     return Candidates(**segments, p_dock=p_dock, entropy=entropy)
@@ -383,7 +388,7 @@ def plan(
             continue
         # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
         whole = probsim.dock_probability(posterior, path, load, compliant)
-        p_dock = float(capped_p_dock(whole.p_stop_vertex, whole.p_stop_edge, holding))
+        p_dock = float(capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding))
         value = values[j] * p_dock / max(candidates.p_dock[j], 1e-300)
         return Plan(
             "dock",

@@ -53,9 +53,16 @@ class DockEstimate:
     """Eqs. (20-22) solved for one path: p_dock = p_prefix_clear * (sum of the stop terms)."""
 
     p_dock: float
-    p_stop_vertex: np.ndarray  # (n,) stop-and-stick probability per vertex
+    # (2, n) stop-and-stick probability per vertex, by how the tool arrived: row 0 by a left
+    # slide (along r(v)), row 1 by a right slide (along l(v))
+    p_stop_vertex_sides: np.ndarray
     p_stop_edge: np.ndarray  # (E,) stop-and-stick probability per edge
     p_prefix_clear: float = 1.0  # probability that the moves before the loading move touch nothing
+
+    @property
+    def p_stop_vertex(self) -> np.ndarray:
+        """(n,) stop-and-stick probability per vertex, both arrivals."""
+        return self.p_stop_vertex_sides.sum(axis=0)
 
 
 def _standardize(mean: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -437,8 +444,8 @@ def dock_probabilities(
 ):
     """Batched eqs. (20-22) for K loading moves ``starts`` -> ``ends`` (K, 2) on one shape.
 
-    Returns p_dock (K,), p_stop_vertex (K, n), p_stop_edge (K, E); ``p_clear`` (K,) multiplies
-    everything (the prefix's no-contact probability; default 1).
+    Returns p_dock (K,), p_stop_vertex (K, 2, n) (by arrival, as ``DockEstimate``), p_stop_edge
+    (K, E); ``p_clear`` (K,) multiplies everything (the prefix's no-contact probability; default 1).
     """
     _check_shape(shape)
     unit(load, "load")
@@ -454,7 +461,7 @@ def dock_probabilities(
     events /= np.maximum(total, 1.0)  # scaled to sum to 1 where they sum to more
     p_c = events.sum(axis=0)
     stop_edge = events[0]
-    stop_vertex = np.zeros((len(p_c), n))
+    stop_vertex = np.zeros((len(p_c), 2, n))
     if compliant:
         trans = _vertex_transitions(shape, terms)
         # Eq. (21) along the edges: a left slide on edge j comes from a contact there or from a
@@ -471,10 +478,12 @@ def dock_probabilities(
         from_right, from_left = np.zeros((count, n)), np.zeros((count, n))
         from_right[:, first] = chains[0]  # P(L) on r(v)
         from_left[:, last] = chains[1][:, ::-1]  # P(R) on l(v)
-        stop_vertex = from_right * trans["stick_left"] + from_left * trans["stick_right"]
+        stop_vertex = np.stack(
+            [from_right * trans["stick_left"], from_left * trans["stick_right"]], axis=1
+        )
     clear = np.ones(len(p_c)) if p_clear is None else np.asarray(p_clear, dtype=float)
-    stop_vertex, stop_edge = stop_vertex * clear[:, None], stop_edge * clear[:, None]
-    p_dock = np.clip(stop_vertex.sum(axis=1) + stop_edge.sum(axis=1), 0.0, 1.0)
+    stop_vertex, stop_edge = stop_vertex * clear[:, None, None], stop_edge * clear[:, None]
+    p_dock = np.clip(stop_vertex.sum(axis=(1, 2)) + stop_edge.sum(axis=1), 0.0, 1.0)
     return p_dock, stop_vertex, stop_edge
 
 
