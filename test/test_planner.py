@@ -75,6 +75,22 @@ def test_shortest_path_avoids_obstacles_and_is_no_longer_than_detour():
     assert length <= np.hypot(1.0, 1.0) + 2 + np.hypot(0.05, 1.0) + 0.02  # over the top
 
 
+def test_paths_cannot_go_round_an_open_profiles_ends_into_the_rock():
+    """A hill seen from above, ending on its two flanks (solid below, walked right to left):
+    the rock under it is an obstacle, so the way to a point under the hill is blocked, while
+    beside it, above the extended flanks, the space stays free."""
+    hill = np.array([[0.4, -0.4], [0.2, 0.0], [0.0, 0.1], [-0.2, 0.0], [-0.4, -0.4]])
+    lor = shapely.buffer(shapely.LineString(hill), 0.005)
+    start = np.array([0.0, 0.5])
+    space = FreeSpace(lor, hill, False, start)
+    under = [[0.0, -0.6], [0.5, -0.9], [-0.5, -0.9]]  # below the chord of the two ends too
+    assert space.blocked(np.array(under)).all()
+    assert space.shortest_path(start, np.array([0.0, -0.6])) is None
+    assert not space.blocked(np.array([[0.6, -0.4], [-0.6, -0.4]])).any()
+    path = space.shortest_path(start, np.array([0.6, -0.4]))
+    assert path is not None and not shapely.intersects(shapely.LineString(path), space.obstacles)
+
+
 def test_a_tool_on_the_outline_leaves_the_way_it_came():
     """On the mean outline ``ascend`` has no direction; ``retrace`` walks the tool's own free
     moves back out of the likely-obstacle region, from the end of the last free move (the core

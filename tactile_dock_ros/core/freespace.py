@@ -6,9 +6,8 @@ samples; its complement, the unlikely-obstacle region (UOR), is free space for t
 Decisions where the paper is silent:
 - the LOR is grown by ``margin`` metres (the planner passes half the contact resolution) so
   that degenerate hulls (few or identical samples) still have an area and paths keep a gap;
-- for an open terrain profile the mean solid (the mean polyline closed by the straight segment
-  from its last to its first vertex) is an obstacle too, so a shortest path cannot sneak round
-  the profile's ends into the rock;
+- the mean solid is an obstacle too, so a shortest path cannot sneak round an open terrain
+  profile's ends into the rock (``solid_region``);
 - the obstacle outline is simplified (after growing by the simplification tolerance, so it
   stays conservative) to keep the visibility graph small.
 """
@@ -50,10 +49,29 @@ def likely_obstacle_region(samples: np.ndarray, edges: np.ndarray, margin: float
 
 
 def solid_region(mean_vertices: np.ndarray, closed: bool):
-    """The mean shape's solid as a polygon, or None when the closed outline is not simple."""
+    """The mean shape's solid as a polygon, or None when the closed outline is not simple.
+
+    Decision for an open profile: the rock goes on past both ends, so each end edge is
+    extended straight on by twice the profile's extent before the polygon closes (the
+    solid is on the left of the walking direction). Closing by the chord from the last to the
+    first vertex left the rock under a depth slice free: the slice ends at the top of a hold
+    (its back is unseen), the chord cuts through the hold, and shortest paths went over the
+    top, down the hidden back and in under the seen face (``bench docking --prior depth``,
+    notch truths 0 and 8). The problems' profiles end in walls going down, so their solid
+    only grows below them. Crossing extensions make a self-intersecting ring; its valid
+    parts are kept.
+    """
     mean_vertices = np.asarray(mean_vertices, float)
     if len(mean_vertices) < 3:
         return None
+    if not closed:
+        reach = 2.0 * np.ptp(mean_vertices, axis=0).max()
+        first = mean_vertices[0] - mean_vertices[1]
+        last = mean_vertices[-1] - mean_vertices[-2]
+        ends = [first, last] / np.maximum(np.linalg.norm([first, last], axis=1), 1e-12)[:, None]
+        mean_vertices = np.vstack(
+            [mean_vertices[0] + reach * ends[0], mean_vertices, mean_vertices[-1] + reach * ends[1]]
+        )
     polygon = shapely.Polygon(mean_vertices)
     if not closed:
         polygon = shapely.make_valid(polygon)
