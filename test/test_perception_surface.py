@@ -21,7 +21,9 @@ from tactile_dock_ros.perception.surface import ray_sigma, surface_columns
 from tactile_dock_ros.perception.terrain_prior import perceive
 from tactile_dock_ros.tools.bench import prior as bench_prior
 
-CONFIG = PerceptionConfig.load(bench_prior.MOCK_CONFIG)
+MOCK = PerceptionConfig.load(bench_prior.MOCK_CONFIG)
+# The slice's prior; the tail tests add the tails past its ends.
+CONFIG = dataclasses.replace(MOCK, occlusion=dataclasses.replace(MOCK.occlusion, tail_m=0.0))
 K = bench_prior.mock_intrinsics()
 
 
@@ -178,11 +180,35 @@ def test_default_is_correlated_and_scenes_still_perceive():
     assert np.all(np.isfinite(verts)) and np.all(np.isfinite(cols)) and cols.shape[1] > 0
 
 
+def test_ray_tails_continue_the_line_of_sight_past_both_ends():
+    truth = problems.get("notch").sample_ground_truth(np.random.default_rng(3))
+    depth = _render(truth)
+    plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
+    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.5, tail_model="ray")
+    tailed = perceive(
+        depth, K, dataclasses.replace(CONFIG, occlusion=occlusion), np.random.default_rng(1)
+    ).prior
+    assert tailed.n_vertices == plain.prior.n_vertices + 2
+    assert tailed.n_basis == plain.prior.n_basis  # nothing behind the ray was measured
+    mean, ends, camera = (
+        tailed.mean_vertices,
+        plain.prior.mean_vertices[[0, -1]],
+        plain.slice.camera_xy,
+    )
+    np.testing.assert_allclose(mean[1:-1], plain.prior.mean_vertices, atol=1e-12)
+    for far, end in ((mean[0], ends[0]), (mean[-1], ends[1])):
+        assert np.linalg.norm(far - end) == pytest.approx(0.5)
+        assert abs(cross(end - camera, far - end)) < 1e-9  # on the ray, behind the end
+        assert np.dot(end - camera, far - end) > 0
+    A = tailed.basis.reshape(tailed.n_vertices, 2, -1)
+    np.testing.assert_allclose(A[[0, -1]], A[[1, -2]])  # they move with their end vertices
+
+
 def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
     truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(1))
     depth = _render(truth)
     plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
-    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.1)
+    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.1, tail_model="bridge")
     tailed = perceive(
         depth, K, dataclasses.replace(CONFIG, occlusion=occlusion), np.random.default_rng(1)
     ).prior
@@ -200,6 +226,10 @@ def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
     m = plain.prior.n_basis
     np.testing.assert_allclose(A[:k, :, :m], np.broadcast_to(A[k, :, :m], (k, 2, m)))
     assert np.linalg.norm(A[-k:, :, m:]) > 0.01
+    with pytest.raises(PerceptionError, match="tail_model"):
+        PerceptionConfig.from_dict(
+            {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}, "occlusion": {"tail_model": "x"}}
+        )
     with pytest.raises(PerceptionError, match="tail_m"):
         PerceptionConfig.from_dict(
             {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}, "occlusion": {"tail_m": -1}}

@@ -1,5 +1,6 @@
 """Samplers: feasibility of every sample, distribution correctness, fallbacks, ESS."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -453,6 +454,8 @@ def test_an_inconsistent_history_is_pruned_until_it_fits():
     problem, index = problems.get("sloper"), problems.names().index("sloper")
     truth = problem.sample_ground_truth(np.random.default_rng([0, index, 2]))
     config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
+    untailed = dataclasses.replace(config.occlusion, tail_m=0.0)  # the episode's prior had none
+    config = dataclasses.replace(config, occlusion=untailed)
     prior = depth_prior(truth, config, np.random.default_rng([0, index, 2, 2])).prior
     data = np.load(Path(__file__).parent / "data/sloper2_depth_history.npz")
     history = History(data["a"], data["b"], data["status"])

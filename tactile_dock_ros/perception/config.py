@@ -141,6 +141,9 @@ class SliceParams:
             raise PerceptionError("slice.max_vertices must be >= 4 and min_points >= 2")
 
 
+TAIL_MODELS = ("ray", "bridge")
+
+
 @dataclass(frozen=True)
 class OcclusionParams:
     bridge_sigma_m_per_sqrt_m: float = 0.3
@@ -149,10 +152,15 @@ class OcclusionParams:
     trajectories: int = 6
     max_hidden_vertices: int = 30
     tail_m: float = 0.0
+    tail_model: str = "ray"
 
     def __post_init__(self) -> None:
         _positive("occlusion.bridge_sigma_m_per_sqrt_m", self.bridge_sigma_m_per_sqrt_m)
         _positive("occlusion.tail_m", self.tail_m, allow_zero=True)
+        if self.tail_model not in TAIL_MODELS:
+            raise PerceptionError(
+                f"occlusion.tail_model must be one of {TAIL_MODELS}, got {self.tail_model!r}"
+            )
         if min(self.columns, self.trajectories, self.max_hidden_vertices) < 1 or self.samples < 2:
             raise PerceptionError("occlusion counts must be >= 1 (samples >= 2)")
 

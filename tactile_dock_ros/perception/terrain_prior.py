@@ -98,13 +98,33 @@ def add_tails(
 
     Past an end the camera saw nothing (a silhouette or the image border): the terrain goes on
     somewhere behind the ray through the end vertex. Without a tail the open polyline lets a
-    path pass around the end through what may be rock. Each tail is a Brownian motion from the
-    end vertex along that ray (``occlusion_columns(free_end=True)``), constrained to the solid
-    side; its rows also move with the end vertex's rows.
+    path pass around the end through what may be rock: the planner closes an open profile by
+    the chord from its last vertex to its first (``core.freespace``), and behind a silhouette
+    (the top of a hold seen from above) that chord leaves the rock under the seen face free,
+    so plans went over the top and down its hidden back (notch truth 0 of ``bench docking``).
+    ``occlusion.tail_model``:
+    - ``ray`` (decision, the profiles' setting): one straight edge per end, from the end
+      vertex along the ray away from the camera, its far vertex moving with the end vertex's
+      rows (no new columns). It is the boundary of the space the camera saw free: the solid
+      side of it is unseen, and the planner's mean solid then covers everything behind the
+      slice. No columns: nothing behind the ray was measured, and a spread lets samples
+      swing the tail into the seen-free space.
+    - ``bridge``: a Brownian motion from the end vertex along that ray
+      (``occlusion_columns(free_end=True)``), constrained to the solid side; its rows also
+      move with the end vertex's rows. It gives every sample its own hidden surface, which
+      the sampler must fit to every contact near the end (slow, and it kept an infeasible
+      sloper truth from giving up in the measurements of docs/perception.md).
+    Either way the tail is no measured surface: docs/perception.md says what it means for
+    docking on it.
     """
     n, m = len(verts), basis.shape[1]
-    k = max(2, round(occlusion.tail_m / spacing_m))
     A = basis.reshape(n, 2, m)
+    if occlusion.tail_model == "ray":
+        rays = verts[[0, -1]] - camera_xy
+        far = verts[[0, -1]] + occlusion.tail_m * rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        rows = np.concatenate([A[:1], A, A[-1:]])
+        return np.vstack([far[:1], verts, far[1:]]), rows.reshape(2 * (n + 2), m)
+    k = max(2, round(occlusion.tail_m / spacing_m))
     tails = []
     for end, side in ((0, -1.0), (n - 1, 1.0)):  # the solid is left of the walking direction
         ray = verts[end] - camera_xy

@@ -83,7 +83,10 @@ def score_terrain(
     out = {"calibration_error": error.tolist()}
     for model in MODELS:
         surface = dataclasses.replace(config.surface, depth_model=model)
-        cfg = dataclasses.replace(config, surface=surface)
+        # Tails past the slice ends measure nothing (a closure for the planner): scored is the
+        # slice's prior.
+        untailed = dataclasses.replace(config.occlusion, tail_m=0.0)
+        cfg = dataclasses.replace(config, surface=surface, occlusion=untailed)
         try:
             result = perceive(depth, K, cfg, np.random.default_rng(seed + 1))
         except PerceptionError as err:
