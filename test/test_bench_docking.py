@@ -5,6 +5,7 @@ import json
 import pytest
 
 from tactile_dock_ros.tools import bench
+from tactile_dock_ros.tools.bench import docking
 
 
 def test_docking_bench_small(tmp_path):
@@ -25,9 +26,27 @@ def test_docking_bench_small(tmp_path):
     assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
 
 
+def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):
+    """The planner gives up below the threshold given: never at 1e-300, on the infeasible
+    sloper truth (#0 of the quick run with seed 1) at 0.9."""
+    assert docking.mock_give_up_threshold() == 0.01  # config/mock.yaml
+    argv = ["--problems", "sloper", "--prior", "problem", "--mode", "compliant"]
+    default = _quick(tmp_path, "default.json", *argv)
+    assert default["give_up_threshold"] == 0.01
+    runs = {
+        t: _quick(tmp_path, f"{t}.json", *argv, "--give-up-threshold", t) for t in ("1e-300", "0.9")
+    }
+    never, eager = ([e for e in runs[t]["results"][0]["episodes"]] for t in ("1e-300", "0.9"))
+    assert runs["0.9"]["give_up_threshold"] == 0.9
+    assert not any(e["outcome"] == "gave_up" for e in never)
+    assert not eager[0]["feasible"] and eager[0]["outcome"] == "gave_up"
+
+
 def _quick(tmp_path, name, *extra):
     out = tmp_path / name
-    argv = ["docking", "--quick", "--problems", "notch", "--strategies", "ours", "--seed", "1"]
+    argv = ["docking", "--quick", "--strategies", "ours", "--seed", "1"]
+    if "--problems" not in extra:
+        argv += ["--problems", "notch"]
     assert bench.main([*argv, *extra, "--json", str(out)]) == 0
     return json.loads(out.read_text())
 
@@ -56,7 +75,8 @@ def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
 @pytest.mark.parametrize(
     "bad",
     [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
-     ["--samples", "1"], ["--max-cycles", "-2"]],
+     ["--samples", "1"], ["--max-cycles", "-2"], ["--give-up-threshold", "0"],
+     ["--give-up-threshold", "1.5"]],
 )  # fmt: skip
 def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:

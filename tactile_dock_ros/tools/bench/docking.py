@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ...core import explore, problems, simulate
 from ...core.shape import GaussianShape
@@ -40,6 +41,20 @@ from ...perception.mock_camera import depth_prior
 PRIORS = ("problem", "depth")
 MODES = ("compliant", "non-compliant")
 PERCEPTION_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
+MOCK_PROFILE = Path(__file__).resolve().parents[3] / "config" / "mock.yaml"
+
+
+def mock_give_up_threshold() -> float:
+    """The mock profile's planner ``give_up_threshold`` (``config/mock.yaml``)."""
+    profile = yaml.safe_load(MOCK_PROFILE.read_text())
+    return float(profile["planner"]["ros__parameters"]["give_up_threshold"])
+
+
+def _probability(text: str) -> float:
+    value = float(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {value}")
+    return value
 
 
 def _at_least(minimum: int):
@@ -80,6 +95,13 @@ def add_arguments(parser) -> None:
         default=PERCEPTION_CONFIG,
         help="camera extrinsic + covariance, depth noise (depth prior)",
     )
+    parser.add_argument(
+        "--give-up-threshold",
+        type=_probability,
+        default=mock_give_up_threshold(),
+        help="the planner gives up below this best P_dock (default: the mock profile's; "
+        "the paper's experiments: 0.001)",
+    )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
 
@@ -97,6 +119,7 @@ class _Task:
     seed: tuple[int, ...]
     max_cycles: int
     samples: int
+    give_up_threshold: float
 
 
 @functools.cache
@@ -124,6 +147,7 @@ def _episode(task: _Task) -> dict:
         np.random.default_rng(task.seed),
         task.max_cycles,
         n_samples=task.samples,
+        give_up_threshold=task.give_up_threshold,
         compliant=task.mode == "compliant",
         prior=task.prior,
     )
@@ -189,6 +213,7 @@ def _summary(episodes: list[dict]) -> dict:
         "cycles_mean": float(cycles.mean()) if len(cycles) else None,
         "cycles_std": float(cycles.std()) if len(cycles) else None,
         "cycles_max": int(cycles.max()) if len(cycles) else None,
+        "feasible_gave_up": sum(e["outcome"] == "gave_up" for e in feasible),
         "infeasible_gave_up": len(give_up_cycles),
         "infeasible_cycle_cap": sum(e["outcome"] == "cycle_cap" for e in infeasible),
         "infeasible_give_up_cycles_median": float(np.median(give_up_cycles))
@@ -305,6 +330,7 @@ def run(args) -> dict:
             truths[key[0]][i]["seed"],
             max_cycles,
             args.samples,
+            args.give_up_threshold,
         )
         for i in range(instances)
         for key in keys
@@ -335,6 +361,7 @@ def run(args) -> dict:
         "instances": instances,
         "max_cycles": max_cycles,
         "samples": args.samples,
+        "give_up_threshold": args.give_up_threshold,
         "workers": args.workers,
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
