@@ -29,10 +29,10 @@ def test_docking_bench_small(tmp_path):
 def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):
     """The planner gives up below the threshold given: never at 1e-300, on the infeasible
     sloper truth (#0 of the quick run with seed 1) at 0.9."""
-    assert docking.mock_give_up_threshold() == 0.01  # config/mock.yaml
+    assert docking.mock_give_up_threshold() == 0.001  # config/mock.yaml
     argv = ["--problems", "sloper", "--prior", "problem", "--mode", "compliant"]
     default = _quick(tmp_path, "default.json", *argv)
-    assert default["give_up_threshold"] == 0.01
+    assert default["give_up_threshold"] == 0.001
     runs = {
         t: _quick(tmp_path, f"{t}.json", *argv, "--give-up-threshold", t) for t in ("1e-300", "0.9")
     }

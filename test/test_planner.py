@@ -194,3 +194,26 @@ def test_bad_samples_or_an_unknown_tool_raise():
         planner.plan(samples, problem.prior, state, config)
     with pytest.raises(ValueError, match="N >= 2"):
         planner.plan(samples[:1], problem.prior, state, config)
+
+
+def test_sites_whose_whole_path_is_unlikely_to_dock_are_passed_over(monkeypatch):
+    """The threshold applies to the whole path: when the way to every site likely touches
+    something first (here: probsim says so), the planner gives up, except for IG's probes."""
+    _, _, plan = _prior_plan("notch")
+    assert plan.decision == "dock" and plan.p_dock >= 1e-3
+    real = probsim.dock_probability
+
+    def blocked_prefix(shape, path, load, compliant=True, method="sequential"):
+        est = real(shape, path, load, compliant, method)
+        scale = 1e-4 / max(est.p_dock, 1e-300)  # the prefix's no-contact probability, shrunk
+        return probsim.DockEstimate(
+            est.p_dock * scale, est.p_stop_vertex_sides * scale, est.p_stop_edge * scale, scale
+        )
+
+    monkeypatch.setattr(probsim, "dock_probability", blocked_prefix)
+    for objective in ("ours", "greedy", "window"):
+        _, _, plan = _prior_plan("notch", objective=objective)
+        assert plan.decision == "give_up", objective
+        assert "whole path 1.00e-04 < threshold 0.001" in plan.reason
+    _, _, probe = _prior_plan("notch", objective="info_gain")
+    assert probe.decision == "dock" and probe.p_dock < 1e-3

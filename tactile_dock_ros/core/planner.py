@@ -338,6 +338,14 @@ def plan(
             eq. (24)'s bonus keeps away from ``state.targets``.
         config: the planner settings (``PlannerConfig``).
 
+    Decision (Sec. III-B gives up when the best P_dock is below the threshold): the threshold
+    applies to the whole path's P_dock, which multiplies in the probability that the way there
+    touches nothing. A docking site whose path falls below it is passed over, and when every
+    site tried is, the planner gives up: on the depth prior an unseen ledge under an overhang
+    kept the best loading move's P_dock at 0.01-0.05 while every way to it passed the
+    overhang (whole path 1e-4 to 2e-3), and infeasible truths ran to the cycle cap. IG's probes
+    (``info_gain``) are not docking attempts and keep their site.
+
     Raises ValueError on malformed input; an infeasible situation is a give-up with a reason.
     """
     samples = np.asarray(samples, float)
@@ -372,6 +380,7 @@ def plan(
         candidates, objective, state.targets, config.contact_resolution, config.give_up_threshold
     )
     order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
+    unreachable = []  # whole-path P_dock of sites whose way there likely touches something
     for j in order[: config.max_path_attempts]:
         tail = candidates.start[j : j + 1]
         if candidates.needs_exit[j]:
@@ -389,6 +398,9 @@ def plan(
         # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
         whole = probsim.dock_probability(posterior, path, load, compliant)
         p_dock = float(capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding))
+        if objective != "info_gain" and p_dock < config.give_up_threshold:
+            unreachable.append(p_dock)
+            continue
         value = values[j] * p_dock / max(candidates.p_dock[j], 1e-300)
         return Plan(
             "dock",
@@ -404,5 +416,12 @@ def plan(
     if not order:
         return _give_up(
             rejected, f"no candidate site scores above 0 under {objective!r}", candidates
+        )
+    if unreachable:
+        return _give_up(
+            rejected,
+            f"best docking probability of a whole path {max(unreachable):.2e} < threshold "
+            f"{config.give_up_threshold:g} ({len(unreachable)} sites' paths)",
+            candidates,
         )
     return _give_up(rejected, "no collision-free prefix to any promising docking site", candidates)
