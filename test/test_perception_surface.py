@@ -180,14 +180,19 @@ def test_default_is_correlated_and_scenes_still_perceive():
     assert np.all(np.isfinite(verts)) and np.all(np.isfinite(cols)) and cols.shape[1] > 0
 
 
-def test_ray_tails_continue_the_line_of_sight_past_both_ends():
-    truth = problems.get("notch").sample_ground_truth(np.random.default_rng(3))
-    depth = _render(truth)
+def _with_and_without_tails(problem, seed, **tails):
+    """(slice prior, the same with ``tails``) from one rendered truth of ``problem``."""
+    depth = _render(problems.get(problem).sample_ground_truth(np.random.default_rng(seed)))
     plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
-    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.5, tail_model="ray")
+    occlusion = dataclasses.replace(CONFIG.occlusion, **tails)
     tailed = perceive(
         depth, K, dataclasses.replace(CONFIG, occlusion=occlusion), np.random.default_rng(1)
     ).prior
+    return plain, tailed
+
+
+def test_ray_tails_continue_the_line_of_sight_past_both_ends():
+    plain, tailed = _with_and_without_tails("notch", 3, tail_m=0.5, tail_model="ray")
     assert tailed.n_vertices == plain.prior.n_vertices + 2
     assert tailed.n_basis == plain.prior.n_basis  # nothing behind the ray was measured
     mean, ends, camera = (
@@ -205,13 +210,7 @@ def test_ray_tails_continue_the_line_of_sight_past_both_ends():
 
 
 def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
-    truth = problems.get("sloper").sample_ground_truth(np.random.default_rng(1))
-    depth = _render(truth)
-    plain = perceive(depth, K, CONFIG, np.random.default_rng(1))
-    occlusion = dataclasses.replace(CONFIG.occlusion, tail_m=0.1, tail_model="bridge")
-    tailed = perceive(
-        depth, K, dataclasses.replace(CONFIG, occlusion=occlusion), np.random.default_rng(1)
-    ).prior
+    plain, tailed = _with_and_without_tails("sloper", 1, tail_m=0.1, tail_model="bridge")
     k = (tailed.n_vertices - plain.prior.n_vertices) // 2
     assert k == 5
     mean, camera = tailed.mean_vertices, plain.slice.camera_xy
