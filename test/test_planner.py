@@ -217,3 +217,21 @@ def test_sites_whose_whole_path_is_unlikely_to_dock_are_passed_over(monkeypatch)
         assert "whole path 1.00e-04 < threshold 0.001" in plan.reason
     _, _, probe = _prior_plan("notch", objective="info_gain")
     assert probe.decision == "dock" and probe.p_dock < 1e-3
+
+
+def test_a_tool_whose_latest_evidence_was_dropped_leaves_the_way_it_came():
+    """The sampler dropped the latest move's contact: the estimate contradicts where the tool
+    is, so the plan first walks back along that move's free part, though the tool is free."""
+    problem = problems.get("notch")
+    samples = problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(0), 60))
+    tool = np.array([0.0, 0.3])
+    history = History(
+        [[0.0, 0.45], [0.0, 0.305]], [[0.0, 0.305], [0.0, 0.295]], [Status.FREE, Status.COLLIDE]
+    )
+    config = PlannerConfig(problem.load, problem.contact_resolution)
+    kept = EpisodeState(history=history, move_ids=[1, 1], tool=tool)
+    lost = EpisodeState(history=history, move_ids=[1, 1], dropped=[1], tool=tool)
+    plans = [planner.plan(samples, problem.prior, s, config) for s in (kept, lost)]
+    assert [p.decision for p in plans] == ["dock", "dock"]
+    np.testing.assert_allclose(plans[1].path[:3], [tool, [0.0, 0.305], [0.0, 0.45]])
+    assert not np.allclose(plans[0].path[1], [0.0, 0.305])  # from a trusted place: straight on

@@ -25,7 +25,7 @@ from .geometry2d import cross
 _SIMPLIFY_TOLERANCE = 0.002
 # Corners of the visibility graph sit this far (metres) outside the obstacle.
 _CORNER_OFFSET = 1e-6
-# The search box extends this far (metres) beyond the obstacles and the start.
+# The search box extends this far (metres) beyond the obstacles and the start points.
 _BOX_MARGIN = 0.1
 
 
@@ -82,6 +82,8 @@ class FreeSpace:
     """Obstacles = LOR (+ mean solid); clearance is the distance to the mean shape's outline."""
 
     def __init__(self, lor, mean_vertices: np.ndarray, closed: bool, start: np.ndarray):
+        """``start``: the tool (2,), or (k, 2) points the search box must hold with it (the
+        tool's own free moves, which ``planner.retrace`` may walk back along)."""
         mean_vertices = np.asarray(mean_vertices, float)
         self.outline = (shapely.LinearRing if closed else shapely.LineString)(mean_vertices)
         ring = np.vstack([mean_vertices, mean_vertices[:1]]) if closed else mean_vertices
@@ -95,9 +97,10 @@ class FreeSpace:
         shapely.prepare(obstacles)
         self.obstacles = obstacles
         x0, y0, x1, y1 = obstacles.bounds
-        sx, sy = np.asarray(start, float)
+        points = np.asarray(start, float).reshape(-1, 2)
+        (sx0, sy0), (sx1, sy1) = points.min(axis=0), points.max(axis=0)
         m = _BOX_MARGIN
-        box = shapely.box(min(x0, sx) - m, min(y0, sy) - m, max(x1, sx) + m, max(y1, sy) + m)
+        box = shapely.box(min(x0, sx0) - m, min(y0, sy0) - m, max(x1, sx1) + m, max(y1, sy1) + m)
         self.free = shapely.difference(box, obstacles)
         shapely.prepare(self.free)
         shapely.prepare(self.outline)

@@ -124,13 +124,26 @@ def retrace(
     return None
 
 
-def _lead(space: FreeSpace, start: np.ndarray, history: History, step: float) -> np.ndarray | None:
+def _lead(
+    space: FreeSpace, start: np.ndarray, state: EpisodeState, step: float
+) -> np.ndarray | None:
     """The path's first part: ``start`` alone in free space, else a way out of the
-    likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None."""
+    likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None.
+
+    Decision: when the sampler dropped an observation of the latest move, the estimate
+    contradicts where the tool just was (notch depth truth 7: it slid down the unseen back of
+    a hold, and every contact there was dropped), so the tool first leaves the way it came,
+    free or not.
+    """
+    latest = np.flatnonzero(state.move_ids == state.move_ids.max(initial=0))
+    if len(state.history) and np.isin(latest, state.dropped).any():
+        lead = retrace(state.history, start, space, step)
+        if lead is not None:
+            return lead
     if not space.blocked(start)[0]:
         return np.array([start])
     lead = space.ascend(start, step)
-    return retrace(history, start, space, step) if lead is None else lead
+    return retrace(state.history, start, space, step) if lead is None else lead
 
 
 def exploration_bonus(aim: np.ndarray, previous: np.ndarray, width: float) -> np.ndarray:
@@ -359,7 +372,9 @@ def plan(
     samples = samples[keep] if keep.sum() >= 2 else samples
     step = 0.5 * config.contact_resolution
     lor = likely_obstacle_region(samples, shape.edges, margin=step)
-    space = FreeSpace(lor, samples.mean(axis=0), shape.closed, start)
+    free = state.history.status == Status.FREE
+    visited = np.vstack([start, state.history.a[free], state.history.b[free]])
+    space = FreeSpace(lor, samples.mean(axis=0), shape.closed, visited)
     segments = terminal_segments(samples, shape.edges, load, space, step)
     if len(segments["edges"]) == 0:
         return _give_up(rejected, "no edge of the shape faces the load direction")
@@ -373,7 +388,7 @@ def plan(
             f"best docking probability {best:.2e} < threshold {config.give_up_threshold:g}",
             candidates,
         )
-    lead = _lead(space, start, state.history, step)
+    lead = _lead(space, start, state, step)
     if lead is None:
         return _give_up(rejected, "the tool is inside the likely-obstacle region with no way out")
     values = score(
