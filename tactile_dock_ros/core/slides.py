@@ -121,11 +121,11 @@ def consistent_with_slides(
         span = (along >= 0) & (along <= reach)
         carries = faces & (slip_right if step > 0 else slip_left)
         fails = np.any(offset < 0, axis=1) | np.any(span & ~carries, axis=1)
-        ok &= ~(hit[:, 0] & (fails | _traps_after(along, reach, carries, faces, closed)))
+        ok &= ~(hit[:, 0] & (fails | _traps_after(along, reach, carries, faces)))
     return ok
 
 
-def _traps_after(along, reach, carries, faces, closed: bool) -> np.ndarray:
+def _traps_after(along, reach, carries, faces) -> np.ndarray:
     """(N,) whether the slide, carried on past its farthest row, would have stuck at a vertex.
 
     A slide is recorded as a group only when it ended by separating (``explore.slide_evidence``
@@ -134,14 +134,11 @@ def _traps_after(along, reach, carries, faces, closed: bool) -> np.ndarray:
     edge that does not: if that edge faces the load the tool would have been trapped at the
     vertex before it (docked, Sec. V-A2), which did not happen; a sample that says so fails.
     A walk off an open polyline's end is a separation. ``along`` (N, E) counts edges from the
-    first contact's edge in the slide direction (modulo E when ``closed``), ``reach`` (N, 1)
-    the farthest row's count.
+    first contact's edge in the slide direction (modulo E when closed; behind it negative),
+    ``reach`` (N, 1) >= 0 the farthest row's count.
     """
     count = along.shape[1]
-    beyond = np.where(along > reach, along - reach, count + 1)
-    if not closed:
-        beyond = np.where(along >= 0, beyond, count + 1)
-    beyond = np.where(carries, count + 1, beyond)
+    beyond = np.where((along > reach) & ~carries, along - reach, count + 1)
     first = beyond.argmin(axis=1)
     rows = np.arange(len(first))
     return (beyond[rows, first] <= count) & faces[rows, first]

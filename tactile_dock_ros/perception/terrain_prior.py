@@ -98,10 +98,10 @@ def add_tails(
 
     Past an end the camera saw nothing (a silhouette or the image border): the terrain goes on
     somewhere behind the ray through the end vertex. Without a tail the open polyline lets a
-    path pass around the end through what may be rock: the planner closes an open profile by
-    the chord from its last vertex to its first (``core.freespace``), and behind a silhouette
-    (the top of a hold seen from above) that chord leaves the rock under the seen face free,
-    so plans went over the top and down its hidden back (notch truth 0 of ``bench docking``).
+    path pass around the end through what may be rock: behind a silhouette (the top of a hold
+    seen from above) plans went over the top and down its hidden back (notch truth 0 of
+    ``bench docking``). The planner's mean solid extends the end edges (``core.freespace.
+    solid_region``), with tails along the rays.
     ``occlusion.tail_model``:
     - ``ray`` (decision, the profiles' setting): one straight edge per end, from the end
       vertex along the ray away from the camera, its far vertex moving with the end vertex's
