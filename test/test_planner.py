@@ -235,3 +235,6 @@ def test_a_tool_whose_latest_evidence_was_dropped_leaves_the_way_it_came():
     assert [p.decision for p in plans] == ["dock", "dock"]
     np.testing.assert_allclose(plans[1].path[:3], [tool, [0.0, 0.305], [0.0, 0.45]])
     assert not np.allclose(plans[0].path[1], [0.0, 0.305])  # from a trusted place: straight on
+    unknown = EpisodeState(history=history, move_ids=[0, 0], dropped=[1], tool=tool)
+    unknown_plan = planner.plan(samples, problem.prior, unknown, config)  # no move to go back on
+    np.testing.assert_allclose(unknown_plan.path, plans[0].path)

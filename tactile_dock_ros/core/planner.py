@@ -135,8 +135,8 @@ def _lead(
     a hold, and every contact there was dropped), so the tool first leaves the way it came,
     free or not.
     """
-    latest = np.flatnonzero(state.move_ids == state.move_ids.max(initial=0))
-    if len(state.history) and np.isin(latest, state.dropped).any():
+    newest = int(state.move_ids.max(initial=0))  # 0: rows of unknown moves (slides too)
+    if newest > 0 and np.isin(np.flatnonzero(state.move_ids == newest), state.dropped).any():
         lead = retrace(state.history, start, space, step)
         if lead is not None:
             return lead
