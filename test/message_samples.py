@@ -54,6 +54,7 @@ def build() -> dict:
             basis=[0.01 * k - 0.05 for k in range(12)],
             closed=True,
             friction=0.6,
+            closure_edges=[2],
         ),
         "ContactSegment": segments[3],
         "ContactHistory": ContactHistory(header=_header(2), segments=segments),

@@ -61,6 +61,8 @@ def test_shape_round_trip_is_exact():
     np.testing.assert_array_equal(back.mean, shape.mean)
     np.testing.assert_array_equal(back.basis, shape.basis)
     assert back.closed and back.friction == shape.friction
+    tailed = GaussianShape(shape.mean, shape.basis, False, 0.5, closure_edges=(0, 3))
+    assert convert.shape_from_msg(convert.shape_to_msg(tailed, HEADER)).closure_edges == (0, 3)
 
 
 @pytest.mark.parametrize(
@@ -72,6 +74,7 @@ def test_shape_round_trip_is_exact():
         ("mean", [np.nan] + [0.0] * 9, "NaN"),
         ("basis", [np.inf] + [0.0] * 29, "NaN or inf"),
         ("friction", -0.1, "friction"),
+        ("closure_edges", [4], "closure_edges"),
     ],
 )
 def test_malformed_shape_is_rejected(field, value, match):

@@ -207,6 +207,8 @@ def test_ray_tails_continue_the_line_of_sight_past_both_ends():
         assert np.dot(end - camera, far - end) > 0
     A = tailed.basis.reshape(tailed.n_vertices, 2, -1)
     np.testing.assert_allclose(A[[0, -1]], A[[1, -2]])  # they move with their end vertices
+    assert tailed.closure_edges == (0, tailed.n_edges - 1)  # no docking site (planner)
+    assert plain.prior.closure_edges == ()
 
 
 def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
@@ -225,6 +227,8 @@ def test_hidden_tails_close_the_slice_ends_on_the_solid_side():
     m = plain.prior.n_basis
     np.testing.assert_allclose(A[:k, :, :m], np.broadcast_to(A[k, :, :m], (k, 2, m)))
     assert np.linalg.norm(A[-k:, :, m:]) > 0.01
+    e = tailed.n_edges
+    assert tailed.closure_edges == (*range(k), *range(e - k, e))
     with pytest.raises(PerceptionError, match="tail_model"):
         PerceptionConfig.from_dict(
             {"extrinsic": {"T_plane_camera": np.eye(4).tolist()}, "occlusion": {"tail_model": "x"}}

@@ -163,6 +163,25 @@ def test_no_edge_facing_the_load_gives_up():
     assert plan.path.shape == (0, 2) and plan.target_edge == -1
 
 
+def test_closure_edges_are_never_docking_sites():
+    """A flat tail past the slice's end (perception's closure edge) looks like a sure hold;
+    marked as a closure edge it holds nothing, and neither do the vertices on it."""
+    mean = np.array([[0.3, -0.6], [0.3, -0.3], [0.15, -0.15], [0.0, 0.0], [-0.3, 0.0]]).ravel()
+    basis = 0.003 * np.random.default_rng(1).standard_normal((10, 4))
+    load = (0.0, -1.0)
+    for closure, decision in (((), "dock"), ((0, 3), "give_up")):
+        shape = GaussianShape(mean, basis, closed=False, friction=0.5, closure_edges=closure)
+        samples = shape.vertices(shape.sample_z(np.random.default_rng(0), 40))
+        q_edge, q_vertex = planner.holding_frequencies(samples, False, load, 0.5, closure)
+        plan = planner.plan(samples, shape, EpisodeState(tool=[0.0, 0.4]), PlannerConfig(load))
+        assert plan.decision == decision, plan.reason
+        if closure:
+            assert q_edge[3] == 0.0 and np.all(q_vertex[:, [0, 1, 3, 4]] == 0.0)
+            assert "threshold" in plan.reason
+        else:
+            assert q_edge[3] > 0.9 and plan.target_edge == 3
+
+
 @pytest.mark.parametrize("edge", [5, 30, 60])
 def test_start_inside_lor_climbs_out_or_gives_up_with_reason(edge):
     problem, samples, _ = _prior_plan("three_ledges")

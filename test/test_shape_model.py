@@ -54,6 +54,15 @@ def test_invalid_shapes_are_rejected(mean, basis, closed, friction):
         GaussianShape(mean, basis, closed, friction)
 
 
+def test_closure_edges_are_checked_sorted_and_kept_by_a_moment_fit():
+    mean, basis = np.arange(8.0), np.eye(8)[:, :2]
+    shape = GaussianShape(mean, basis, closure_edges=[2, 0, 2])
+    assert shape.closure_edges == (0, 2)
+    assert shape.with_mean_basis(mean, basis).closure_edges == (0, 2)
+    with pytest.raises(ValueError, match="closure_edges"):
+        GaussianShape(mean, basis, closure_edges=(3,))  # 4 vertices, open: edges 0-2
+
+
 def test_history_validates_and_extends():
     h = History().extend([0, 0], [1, 0], Status.FREE).extend([1, 0], [1, -0.01], Status.STICK)
     assert len(h) == 2 and h.is_contact.tolist() == [False, True]

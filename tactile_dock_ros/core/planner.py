@@ -215,7 +215,9 @@ def terminal_segments(
     }
 
 
-def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float):
+def holding_frequencies(
+    samples: np.ndarray, closed: bool, load, friction: float, closure_edges=()
+) -> tuple[np.ndarray, np.ndarray]:
     """Fraction of posterior samples in which each edge (E,) / vertex (2, n) can hold the load.
 
     An edge holds when it faces the load and slips neither way (eq. 12); a vertex traps a
@@ -225,6 +227,12 @@ def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float
     ``probsim.DockEstimate.p_stop_vertex_sides``). Polyline ends never trap. These are eq.
     (19)'s sample estimates of the events P(F holds), over samples that satisfy every history
     constraint exactly.
+
+    Decision: ``closure_edges`` (``GaussianShape.closure_edges``: perception's tails past the
+    slice ends) and the vertices on them hold nothing. A tail is the ray past what the camera
+    saw, not a surface; flatter than the friction angle it looked like a sure hold (P_dock
+    0.98-1.0 for 12 cycles on three_ledges truths 9 and 19, with a camera that sees the whole
+    wall: no contact ever came, and the rigid tail could not learn).
     """
     n = samples.shape[1]
     edges, left, right = simulate.edge_index_arrays(n, closed)
@@ -239,7 +247,11 @@ def holding_frequencies(samples: np.ndarray, closed: bool, load, friction: float
         [sl[:, right] & fa[:, left] & ~sl[:, left], sr[:, left] & fa[:, right] & ~sr[:, right]],
         axis=1,
     )
-    return holds.mean(axis=0), np.where(ends, 0.0, trap.mean(axis=0))
+    q_edge, q_vertex = holds.mean(axis=0), np.where(ends, 0.0, trap.mean(axis=0))
+    closure = np.asarray(closure_edges, dtype=int)
+    q_edge[closure] = 0.0
+    q_vertex[:, edges[closure].ravel()] = 0.0
+    return q_edge, q_vertex
 
 
 def capped_p_dock(stop_vertex, stop_edge, holding) -> np.ndarray:
@@ -379,7 +391,7 @@ def plan(
     if len(segments["edges"]) == 0:
         return _give_up(rejected, "no edge of the shape faces the load direction")
     posterior = GaussianShape.from_samples(samples, shape.closed, friction)
-    holding = holding_frequencies(samples, shape.closed, load, friction)
+    holding = holding_frequencies(samples, shape.closed, load, friction, shape.closure_edges)
     candidates = evaluate(posterior, segments, load, compliant, holding)
     best = float(candidates.p_dock.max())
     if best < config.give_up_threshold:

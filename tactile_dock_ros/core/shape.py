@@ -23,12 +23,16 @@ class GaussianShape:
         basis: (2n, m) matrix A; covariance = A A^T (m may be 0).
         closed: whether edge (n-1, 0) exists.
         friction: Coulomb friction coefficient of the surface.
+        closure_edges: indices of edges that only close an open profile past what the sensor
+            saw (perception's tails, ``terrain_prior.add_tails``): no measured surface, so no
+            docking site (``planner.holding_frequencies``). Sorted, unique, in [0, E).
     """
 
     mean: np.ndarray
     basis: np.ndarray
     closed: bool = False
     friction: float = 0.5
+    closure_edges: tuple[int, ...] = ()
     edges: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -45,6 +49,10 @@ class GaussianShape:
             raise ValueError("a closed shape needs at least 3 vertices")
         first = np.arange(n if self.closed else n - 1)
         edges = np.stack([first, (first + 1) % n], axis=1)
+        closure = tuple(int(e) for e in np.unique(np.asarray(self.closure_edges, dtype=int)))
+        if closure and not (0 <= closure[0] and closure[-1] < len(edges)):
+            raise ValueError(f"closure_edges must lie in [0, {len(edges)}), got {closure}")
+        object.__setattr__(self, "closure_edges", closure)
         for name, value in (("mean", mean), ("basis", basis), ("edges", edges)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -91,8 +99,9 @@ class GaussianShape:
         return self.mean[rows], a_edge @ np.swapaxes(a_edge, 1, 2)
 
     def with_mean_basis(self, mean: np.ndarray, basis: np.ndarray) -> GaussianShape:
-        """Same topology and friction, new Gaussian (e.g. a posterior moment fit)."""
-        return GaussianShape(mean, basis, self.closed, self.friction)
+        """Same topology, friction and closure edges, new Gaussian (e.g. a posterior moment
+        fit)."""
+        return GaussianShape(mean, basis, self.closed, self.friction, self.closure_edges)
 
     @classmethod
     def from_samples(cls, samples: np.ndarray, closed: bool, friction: float) -> GaussianShape:

@@ -141,6 +141,7 @@ def shape_to_msg(shape: GaussianShape, header: Header) -> ShapeDistribution:
         basis=shape.basis.ravel().tolist(),
         closed=bool(shape.closed),
         friction=float(shape.friction),
+        closure_edges=list(shape.closure_edges),
     )
 
 
@@ -156,7 +157,13 @@ def shape_from_msg(msg: ShapeDistribution) -> GaussianShape:
     mean = finite("mean", msg.mean)
     basis = finite("basis", msg.basis).reshape(2 * n, m)
     try:
-        return GaussianShape(mean, basis, closed=bool(msg.closed), friction=float(msg.friction))
+        return GaussianShape(
+            mean,
+            basis,
+            closed=bool(msg.closed),
+            friction=float(msg.friction),
+            closure_edges=tuple(int(e) for e in msg.closure_edges),
+        )
     except ValueError as err:
         raise MessageError(str(err)) from err
 

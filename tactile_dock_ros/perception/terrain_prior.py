@@ -114,8 +114,8 @@ def add_tails(
       move with the end vertex's rows. It gives every sample its own hidden surface, which
       the sampler must fit to every contact near the end (slow, and it kept an infeasible
       sloper truth from giving up in the measurements of docs/perception.md).
-    Either way the tail is no measured surface: docs/perception.md says what it means for
-    docking on it.
+    Either way the tail is no measured surface: ``build_prior`` marks its edges as the
+    shape's ``closure_edges``, which the planner never docks on.
     """
     n, m = len(verts), basis.shape[1]
     A = basis.reshape(n, 2, m)
@@ -191,11 +191,16 @@ def build_prior(
             *blocks,
         ]
     )
+    closure: tuple[int, ...] = ()
     if occlusion.tail_m > 0:
         verts, basis = add_tails(
             verts, basis, terrain.camera_xy, occlusion, terrain.spacing_m, rng, sampler
         )
-    return GaussianShape(verts.ravel(), basis, closed=False, friction=friction)
+        t = (len(verts) - n) // 2  # tail vertices per end: the first and last t edges
+        closure = (*range(t), *range(t + n - 1, 2 * t + n - 1))
+    return GaussianShape(
+        verts.ravel(), basis, closed=False, friction=friction, closure_edges=closure
+    )
 
 
 @dataclass(frozen=True)
