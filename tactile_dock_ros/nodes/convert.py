@@ -162,7 +162,7 @@ def shape_from_msg(msg: ShapeDistribution) -> GaussianShape:
             basis,
             closed=bool(msg.closed),
             friction=float(msg.friction),
-            closure_edges=tuple(int(e) for e in msg.closure_edges),
+            closure_edges=msg.closure_edges,
         )
     except ValueError as err:
         raise MessageError(str(err)) from err
