@@ -254,15 +254,24 @@ def test_live_pair_exit_search_matches_every_primitive():
     np.testing.assert_array_equal(first[hit], np.argmax(bad[hit], axis=1))
 
 
-def test_burn_in_runs_in_the_same_hmc_batch(sloper_case):
-    """``run(z, steps, thin, burn_in)`` keeps the states after the burn-in moves, every
-    ``thin``-th move, of one ``hmc_chains`` batch with the same random stream."""
+@pytest.mark.parametrize("target", [sampling.HMC_TARGET_BOUNCES, 2])
+def test_hmc_burn_in_sets_the_move_duration_from_the_bounce_rate(sloper_case, monkeypatch, target):
+    """Each burn-in move measures bounces per rad; the kept moves (every ``thin``-th) use
+    T = HMC_TARGET_BOUNCES / rate, at most ``hmc_duration``. Sloper needs a few bounces per
+    move: T stays pi/2; asking for 2 bounces per move shortens it."""
+    monkeypatch.setattr(sampling, "HMC_TARGET_BOUNCES", target)
     problem, history = sloper_case
     z = sample_posterior(problem.prior, history, 16, np.random.default_rng(2)).z[:4]
     system = HistoryConstraints(problem.prior, history, prune_pairs(problem.prior, history, 1e-4))
-    kept = ChainRunner(system, "hmc", np.random.default_rng(5)).run(z, 3, thin=2, burn_in=1)
-    every, _ = sampling.hmc_chains(system, z, 7, np.random.default_rng(5))
-    np.testing.assert_array_equal(kept, every[:, [2, 4, 6]])
+    runner = ChainRunner(system, "hmc", np.random.default_rng(5))
+    kept = runner.run(z, 3, thin=2, burn_in=1)
+    rng = np.random.default_rng(5)
+    burn, stats = sampling.hmc_chains(system, z, 1, rng)
+    rate = stats["bounces"] / stats["travel"]
+    assert stats["bounces"] > 0 and (target / rate < np.pi / 2) == (target == 2)
+    assert runner.duration == pytest.approx(min(target / rate, np.pi / 2))
+    every, _ = sampling.hmc_chains(system, burn[:, -1], 6, rng, runner.duration)
+    np.testing.assert_array_equal(kept, every[:, [1, 3, 5]])
 
 
 @pytest.mark.parametrize("n", [1, 100, 255, 257, 1000, 1025, 4096, 5000, 20000])
@@ -406,6 +415,41 @@ def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch
     assert history_consistent(False, fixed.vertices, history, problem.friction).all()
 
 
+class _WalkRunner:
+    """A random walk (step 0.1) that, with ``kick``, throws the first chain of every call to
+    z_0 = 20: a chain the exact test (patched to z_0 < 5) never passes."""
+
+    method = "walk"
+
+    def __init__(self, kick):
+        self.kick, self.rng = kick, np.random.default_rng(0)
+
+    def run(self, z, count, thin, burn_in):
+        z = z.copy()
+        if self.kick:
+            z[0, 0] = 20.0
+        steps = 0.1 * self.rng.standard_normal((len(z), burn_in + count, z.shape[1]))
+        return (z[:, None] + np.cumsum(steps, axis=1))[:, burn_in:]
+
+
+@pytest.mark.parametrize("kick", [False, True])
+def test_a_chain_that_never_verifies_does_not_empty_the_run(monkeypatch, caplog, kick):
+    """Chain 0 starts at z_0 = 10, where every draw fails the exact test. It restarts from a
+    full chain (and verifies) or, when it fails again, is dropped with a warning; the other
+    chains keep their full length (before: every chain was cut to chain 0's zero draws)."""
+    monkeypatch.setattr(sampling, "_consistent_rows", lambda shape, history, z: z[:, 0] < 5)
+    run = sampling._ChainRun(_WalkRunner(kick), None, None, 30, 1, 5, 200, np.random.default_rng(1))
+    z0 = np.zeros((6, 3))
+    z0[0, 0] = 10.0
+    with caplog.at_level("WARNING", logger=sampling.__name__):
+        draws, last, kept = run(z0)
+    assert draws.shape == ((5, 30, 3) if kick else (6, 30, 3))
+    assert np.all(draws[..., 0] < 5)
+    assert kept.tolist() == ([1, 2, 3, 4, 5] if kick else list(range(6)))
+    assert last.shape == (len(kept), 3) and np.all(last[:, 0] < 5)
+    assert ("1 of 6 walk chains dropped" in caplog.text) == kick
+
+
 def test_split_rhat_and_trapped_chains_on_synthetic_draws():
     rng = np.random.default_rng(0)
     draws = rng.normal(size=(40, 16, 3))
@@ -465,3 +509,26 @@ def test_an_inconsistent_history_is_pruned_until_it_fits():
     kept = history.subset(np.setdiff1d(np.arange(len(history)), out.dropped))
     assert len(out.z) == 100 and 0 < len(out.dropped) < len(history)
     assert history_consistent(False, out.vertices, kept, prior.friction).all()
+    # the next cycle passes the dropped rows on: they stay out without another seed search
+    again = sample_posterior(
+        prior, history, 100, np.random.default_rng(1), init_z=out.z, known_dropped=out.dropped
+    )
+    assert again.dropped.tolist() == out.dropped.tolist() and len(again.z) == 100
+    assert again.info["warm_seeds"] >= again.info["chains"]
+    assert history_consistent(False, again.vertices, kept, prior.friction).all()
+
+
+def test_known_dropped_rows_stay_out_and_must_be_history_rows(sloper_case):
+    problem, history = sloper_case
+    contact = int(np.flatnonzero(history.status != Status.FREE)[0])
+    for method in ("hmc", "rejection"):
+        out = sample_posterior(
+            problem.prior, history, 50, np.random.default_rng(0), method, known_dropped=[contact]
+        )
+        assert out.dropped.tolist() == [contact]
+        rest = history.subset(np.setdiff1d(np.arange(len(history)), [contact]))
+        assert history_consistent(False, out.vertices, rest, problem.friction).all()
+        # the contact no longer binds: some samples miss it
+        assert not history_consistent(False, out.vertices, history, problem.friction).all()
+    with pytest.raises(ValueError, match="known_dropped"):
+        sample_posterior(problem.prior, history, 10, np.random.default_rng(0), known_dropped=[-1])

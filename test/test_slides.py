@@ -35,6 +35,19 @@ def level_edge(vertices, edge):
     return out
 
 
+def test_pieces_near_the_load_direction_give_no_slip_observation():
+    """A segment along the load crosses a piece only within contact_resolution * sin / 2 of
+    its middle: a piece closer than 30 degrees to the load (a wall below a ledge lip) gives no
+    row, a 31-degree ledge piece does."""
+    push = np.array([0.0, -1.0])
+    starts = np.array([[0.0, 0.0], [0.1, -0.1], [0.3, -0.1]])
+    ends = np.array([[0.1, -0.06], [0.102, -0.15], [0.32, -0.14]])  # 59, 2.3, 26.6 deg off load
+    evidence = slides.crossed_piece_evidence(starts, ends, push, 0.005, Status.SLIP_LEFT)
+    np.testing.assert_allclose(0.5 * (evidence.a + evidence.b), [[0.05, -0.03]])
+    np.testing.assert_allclose(evidence.b - evidence.a, [[0.0, -0.005]])
+    assert evidence.status.tolist() == [Status.SLIP_LEFT]
+
+
 def test_a_level_edge_between_two_slide_observations_fails_the_sample():
     slope = slope_shape()
     history = slide_probes(slope, [3, 1])  # edge 2 in between carries no observation

@@ -106,7 +106,13 @@ def run_episode(
         for cycle in range(max_cycles):
             t0 = time.perf_counter()
             post = sampling.sample_posterior(
-                prior, state.history, n_samples, rng, method, init_z=state.warm_start
+                prior,
+                state.history,
+                n_samples,
+                rng,
+                method,
+                init_z=state.warm_start,
+                known_dropped=state.dropped,
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:

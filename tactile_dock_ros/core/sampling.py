@@ -79,6 +79,8 @@ RESEED_ROUNDS = 2  # re-seed + rerun rounds for trapped chains (``convergence``)
 WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
 WINDOW_MIN = 0.01  # rad: smallest adaptive HMC look-ahead window
 WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then clipped)
+HMC_TARGET_BOUNCES = 100  # burn-in shortens HMC moves to about this many bounces (limit 500)
+HMC_MIN_DURATION = 0.02  # rad: shortest adapted HMC move
 
 
 @dataclass(frozen=True)
@@ -227,7 +229,8 @@ def hmc_chains(
     - roots closer than 1e-9 to the current time are ignored (the one just bounced on);
     - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
       loop schedules windows and bounces.
-    Returns the draws and counters (bounces, rejected moves).
+    Returns the draws and counters (bounces, rejected moves, travel: rad followed by all
+    chains, rejected moves included).
     """
     if not 0 < duration < np.pi:
         raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
@@ -240,7 +243,7 @@ def hmc_chains(
     p = momenta[0].copy()
     left = np.full(c, float(duration))
     bounced = np.zeros(c, dtype=int)
-    stats = {"bounces": 0, "rejected": 0}
+    stats = {"bounces": 0, "rejected": 0, "travel": 0.0}
     if window is None:
         window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
     win = np.full(c, float(window))
@@ -266,6 +269,7 @@ def hmc_chains(
         stuck = hit & (first == 0)
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
+        stats["travel"] += float(dt.sum())
         cos, sin = np.cos(dt)[:, None], np.sin(dt)[:, None]
         z_new, p_new = zc * cos + pc * sin, pc * cos - zc * sin
         bounce = hit & ~stuck
@@ -339,7 +343,8 @@ class ChainRunner:
         if method not in MCMC_METHODS:
             raise ValueError(f"unknown MCMC method {method!r}; choose from {MCMC_METHODS}")
         self.system, self.method, self.rng = system, method, rng
-        self.hmc_duration = hmc_duration
+        self.hmc_duration = self.duration = hmc_duration
+        self.last: dict = {}
         self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
         self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
 
@@ -357,17 +362,15 @@ class ChainRunner:
 
     def run(self, z: np.ndarray, steps: int, thin: int = 1, burn_in: int = 0) -> np.ndarray:
         """States after each of ``steps`` kept steps (``thin`` moves each) that follow
-        ``burn_in`` discarded moves (MH adapts its step during those only): (C, steps, m).
-
-        HMC runs burn-in and kept moves in one asynchronous batch (``hmc_chains``), so the
-        chains do not wait for the slowest one in between."""
+        ``burn_in`` discarded moves (MH adapts its step and HMC its duration during those
+        only): (C, steps, m)."""
         if self.method == "hmc":
-            moves = burn_in + steps * thin
-            draws, stats = hmc_chains(self.system, z, moves, self.rng, self.hmc_duration)
-            self.stats["bounces"] += stats["bounces"]
-            self.stats["accepted"] += len(z) * moves - stats["rejected"]
-            self.stats["proposed"] += len(z) * moves
-            return draws[:, burn_in + thin - 1 :: thin]
+            for _ in range(burn_in):  # one move at a time: at most one at the full duration
+                z = self._hmc(z, 1)[:, -1]
+                self._adapt_duration()
+            return self._hmc(z, steps * thin)[:, thin - 1 :: thin]
+        for _ in range(burn_in):
+            z = self.step(z, adapt=True)
         for _ in range(burn_in):
             z = self.step(z, adapt=True)
         out = np.empty((len(z), steps, z.shape[1]))
@@ -376,6 +379,27 @@ class ChainRunner:
                 z = self.step(z)
             out[:, i] = z
         return out
+
+    def _hmc(self, z: np.ndarray, moves: int) -> np.ndarray:
+        draws, stats = hmc_chains(self.system, z, moves, self.rng, self.duration)
+        self.last = stats
+        self.stats["bounces"] += stats["bounces"]
+        self.stats["accepted"] += len(z) * moves - stats["rejected"]
+        self.stats["proposed"] += len(z) * moves
+        return draws
+
+    def _adapt_duration(self) -> None:
+        """After burn-in: the HMC move duration for the kept moves, from the burn-in's bounce
+        rate. Decision (the paper fixes T): in a thin posterior (many contacts on a sharp
+        depth prior) a T = pi/2 move needs thousands of bounces, so nearly every move hits
+        ``max_bounces`` and is rejected; chains then stay at their seeds (notch, depth prior:
+        136 of 160 moves rejected, 20 s per cycle, split R-hat 3.7). The duration becomes
+        HMC_TARGET_BOUNCES / (bounces per rad), within [HMC_MIN_DURATION, hmc_duration]. It is
+        fixed before any kept move, so the kept moves are plain HMC with that T."""
+        rate = self.last["bounces"] / max(self.last["travel"], 1e-12)
+        shortest = min(HMC_MIN_DURATION, self.hmc_duration)
+        wanted = HMC_TARGET_BOUNCES / max(rate, 1e-12)
+        self.duration = float(np.clip(wanted, shortest, self.hmc_duration))
 
 
 def _picked_violated(system, coef, mids, pick) -> np.ndarray:
@@ -681,16 +705,23 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
 class _ChainRun:
     """Runs chains from given seeds to ``per_chain`` verified draws each (burn-in first); every
     draw is checked against the whole history and dropped if it fails. Counts steps per chain,
-    chain moves and verified draws over all calls."""
+    chain moves and verified draws over all calls.
 
-    def __init__(self, runner, shape, history, per_chain, thin, burn_in, max_steps):
+    Decision (not in the paper, which verifies nothing): a chain can sit where the pruned
+    system admits states the exact test rejects, and then never verifies a draw. Such a chain
+    must not cut the others to its length (it used to empty the result). Chains left short of
+    ``per_chain`` while others are full restart once from the last state of a random full
+    chain (with burn-in); chains then holding fewer than half the best chain's draws are
+    dropped with a warning."""
+
+    def __init__(self, runner, shape, history, per_chain, thin, burn_in, max_steps, rng):
         self.runner, self.shape, self.history = runner, shape, history
         self.per_chain, self.thin, self.burn_in = per_chain, thin, burn_in
-        self.max_steps = max_steps
+        self.max_steps, self.rng = max_steps, rng
         self.steps = self.moves = self.verified = 0
 
-    def __call__(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Draws (C, L, m), L the fewest verified draws of any chain, and the last states."""
+    def _collect(self, z: np.ndarray) -> tuple[list, np.ndarray]:
+        """At most ``per_chain`` verified draws per chain (lists) and the last states."""
         chains, m = z.shape
         chain_draws = [[] for _ in range(chains)]
         steps = 0
@@ -707,8 +738,36 @@ class _ChainRun:
                 chain_draws[c].extend(block[c, ok[c]])
         self.steps += steps
         self.moves += steps * chains
-        length = min(len(c) for c in chain_draws)
-        return np.array([c[:length] for c in chain_draws]).reshape(chains, length, m), z
+        return [c[: self.per_chain] for c in chain_draws], z
+
+    def __call__(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Draws (K, L, m) of the K kept chains (L the fewest verified draws among them), their
+        last states (K, m) and their indices into ``z`` (K,)."""
+        chain_draws, z = self._collect(z)
+        counts = np.array([len(c) for c in chain_draws])
+        full = np.flatnonzero(counts >= self.per_chain)
+        short = np.flatnonzero(counts < self.per_chain)
+        if short.size and full.size:
+            redo, z_redo = self._collect(z[self.rng.choice(full, short.size)])
+            z = z.copy()
+            for i, c in enumerate(short):
+                chain_draws[c], z[c] = redo[i], z_redo[i]
+            counts = np.array([len(c) for c in chain_draws])
+        kept = np.flatnonzero(counts >= max(1, -(-counts.max() // 2)))
+        if counts.max() == 0:
+            kept = np.arange(len(z))
+        elif kept.size < len(z):
+            LOG.warning(
+                "%d of %d %s chains dropped: fewer than half the verified draws of the best "
+                "chain (%d) even after a restart from another chain",
+                len(z) - kept.size,
+                len(z),
+                self.runner.method,
+                counts.max(),
+            )
+        length = int(counts[kept].min())
+        draws = np.array([chain_draws[c][:length] for c in kept]).reshape(kept.size, length, -1)
+        return draws, z[kept], kept
 
 
 def _reseed_trapped(run, draws, last, exact, rng):
@@ -728,12 +787,16 @@ def _reseed_trapped(run, draws, last, exact, rng):
         rounds += 1
         reseeded += trapped.size
         good = np.setdiff1d(np.arange(len(draws)), trapped)
-        new, new_last = run(last[rng.choice(good, trapped.size)])
-        length = min(draws.shape[1], new.shape[1])
-        draws = draws[:, :length].copy()
-        draws[trapped] = new[:, :length]
-        last = last.copy()
-        last[trapped] = new_last
+        new, new_last, kept = run(last[rng.choice(good, trapped.size)])
+        if new.shape[1] == 0:  # no rerun chain verified a draw: drop them all
+            kept = kept[:0]
+        lost, trapped = np.delete(trapped, kept), trapped[kept]
+        draws, last = draws.copy(), last.copy()
+        if kept.size:
+            length = min(draws.shape[1], new.shape[1])
+            draws = draws[:, :length]
+            draws[trapped], last[trapped] = new[:, :length], new_last
+        draws, last, exact = (np.delete(a, lost, axis=0) for a in (draws, last, exact))
         LOG.warning(
             "%d of %d %s chains trapped away from the others: re-seeded from other chains "
             "(round %d of %d)",
@@ -804,6 +867,7 @@ def sample_posterior(
     seed_restarts: int = 8,
     seed_iters: int = 60,
     init_z: np.ndarray | None = None,
+    known_dropped=(),
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -823,6 +887,12 @@ def sample_posterior(
     exact geometric test. An empty history returns exact prior draws. ``max_steps`` (default
     50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
     verification keeps failing.
+
+    ``known_dropped``: history rows an earlier call dropped (the previous cycle's
+    ``dropped``); they stay out and are reported in ``dropped`` again. Decision: a row once
+    judged inconsistent is not judged again each cycle. Re-judging repeated the failing seed
+    search (8 descent restarts) every cycle: sloper truth 5, depth prior, spent 30 of 33 s of
+    sampling there, dropping the same row each time.
 
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
     observations, seeds the chains: its rows consistent with the history (the previous
@@ -844,13 +914,18 @@ def sample_posterior(
         if not np.all(np.isfinite(init_z)):
             raise ValueError("init_z must be finite")
     n_samples = int(n_samples)
-    dropped = np.zeros(0, dtype=int)
-    kept_idx = np.arange(len(history))
+    dropped = np.unique(np.asarray(known_dropped, dtype=int).reshape(-1))
+    if np.any((dropped < 0) | (dropped >= len(history))):
+        raise ValueError(
+            f"known_dropped rows {dropped.tolist()} outside the {len(history)}-row history"
+        )
+    kept_idx = np.setdiff1d(np.arange(len(history)), dropped)
     info: dict = {"chains": chains if SAMPLERS[method].mcmc else 0}
     if len(history) == 0 or n_samples == 0:
         return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
     if not SAMPLERS[method].mcmc:
-        z, stats = _rejection(shape, history, n_samples, rng, max_draws, max(1024, 4 * n_samples))
+        kept = history.subset(kept_idx)
+        z, stats = _rejection(shape, kept, n_samples, rng, max_draws, max(1024, 4 * n_samples))
         info.update(stats)
         return PosteriorSamples(
             z,
@@ -889,9 +964,9 @@ def sample_posterior(
         burn_in = SAMPLERS[method].burn_in[int(warm)]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
     runner = ChainRunner(seeds.system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
-    run = _ChainRun(runner, shape, sub, per_chain, thin, burn_in, max_steps)
-    draws, last = run(seeds.z)
-    draws, convergence = _reseed_trapped(run, draws, last, seeds.exact, rng)
+    run = _ChainRun(runner, shape, sub, per_chain, thin, burn_in, max_steps, rng)
+    draws, last, kept = run(seeds.z)
+    draws, convergence = _reseed_trapped(run, draws, last, seeds.exact[kept], rng)
     chains, length = draws.shape[:2]
     z = draws.swapaxes(0, 1).reshape(-1, shape.n_basis)[:n_samples]
     vertices = shape.vertices(z)
@@ -911,9 +986,12 @@ def sample_posterior(
         screened_seeds=seeds.screened,
         pairs_total=len(sub) * shape.n_edges,
         verified_fraction=run.verified / max(run.moves, 1),
+        chains_kept=chains,
     )
     if method == "mh":
         info["mh_scale"] = float(runner.scale)
+    if method == "hmc":
+        info["hmc_duration"] = runner.duration
     return PosteriorSamples(
         z, vertices, method, ess, time.perf_counter() - start, dropped, info, convergence
     )

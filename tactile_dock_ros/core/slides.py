@@ -22,6 +22,7 @@ from . import simulate
 from .history import History, Status
 
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
+MIN_PIECE_SINE = 0.5  # crossed pieces closer than 30 degrees to the load give no observation
 
 
 def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status) -> History:
@@ -32,12 +33,24 @@ def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status
 
     Decision: one observation per piece; two per piece pinned the surface so tightly that the
     sampler's seed search failed on three_ledges (and then dropped consistent observations).
+    Decision: a piece within 30 degrees of ``push`` (|sin| < MIN_PIECE_SINE; e.g. the vertical
+    wall below a ledge lip the tool drops along) gives none. A segment along ``push`` crosses
+    such a piece only if the surface passes within contact_resolution * sin / 2 of its middle
+    (0.1 mm for a wall 2 degrees off the load): no sample of a 2 cm-edge depth prior fits it,
+    the seed search failed, and the sampler dropped it and 3-8 good slip rows with it every
+    cycle (three_ledges truth 9, depth prior), so the slides were forgotten.
     The pieces are the ground-truth edges the simulated robot slid over
     (``explore.slide_evidence``), or the straight runs of the executor's trace
     (``execution.guarded.crossed_pieces``).
     """
-    middle = 0.5 * (np.reshape(starts, (-1, 2)) + np.reshape(ends, (-1, 2)))
-    half = 0.5 * contact_resolution * np.asarray(push, float)
+    starts, ends = np.reshape(starts, (-1, 2)), np.reshape(ends, (-1, 2))
+    push = np.asarray(push, float)
+    piece = ends - starts
+    length = np.linalg.norm(piece, axis=1)
+    sine = np.abs(piece @ np.array([push[1], -push[0]])) / np.where(length > 0, length, 1.0)
+    keep = sine >= MIN_PIECE_SINE
+    middle = 0.5 * (starts[keep] + ends[keep])
+    half = 0.5 * contact_resolution * push
     return History(middle - half, middle + half, np.full(len(middle), int(status)))
 
 

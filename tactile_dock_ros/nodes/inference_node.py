@@ -207,6 +207,7 @@ class InferenceNode(Node):
                 self.rng,
                 method=self.p.method,
                 init_z=state.warm_start,  # warm start from the previous cycle's posterior
+                known_dropped=state.dropped,  # rows judged inconsistent stay out
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
