@@ -116,6 +116,24 @@ def test_a_tool_on_the_outline_leaves_the_way_it_came():
     assert planner.retrace(history, np.array([0.3, 0.5]), space, 0.005) is None  # too far
 
 
+def test_retrace_crosses_from_a_plan_to_the_move_the_executor_retreated_along():
+    """A plan starts where the executor's retreat (not recorded) left the tool: 1 cm back along
+    the previous plan's last move, not at its end. The walk continues along that move."""
+    block = shapely.box(-1.0, -1.0, 1.0, 1.0)
+    space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, np.array([0.0, 2.0]))
+    history = History(
+        [[0.0, 2.0], [0.0, 0.965], [0.0, 0.98], [0.505, 0.975]],
+        [[0.0, 0.97], [0.0, 0.955], [0.5, 0.98], [0.515, 0.985]],  # plan 1: down, collided
+        [Status.FREE, Status.COLLIDE, Status.FREE, Status.COLLIDE],  # plan 2: from its retreat
+    )
+    start = np.array([0.49, 0.98])  # retreated along plan 2's move
+    path = planner.retrace(history, start, space, 0.005)
+    np.testing.assert_allclose(path, [start, [0.0, 0.98], [0.0, 2.0]])
+    assert not space.blocked(path[-1])[0]
+    cut = History(history.a[2:], history.b[2:], history.status[2:])  # without plan 1's move
+    assert planner.retrace(cut, start, space, 0.005) is None
+
+
 @pytest.mark.parametrize("name", problems.names())
 def test_holding_frequencies_match_the_simulated_contacts(name):
     problem, samples, _ = _prior_plan(name)

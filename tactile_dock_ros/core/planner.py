@@ -100,9 +100,11 @@ def retrace(
     recorded), where the posterior's margin often covers it; when ``FreeSpace.ascend`` finds
     no way out (the tool sits on the mean outline), the tool leaves the way it came. It steps
     to the nearest point of the latest free observation within RETRACE_REACH metres (undoing
-    the retreat), follows it back to its start, then earlier ones each ending within ``step``
-    of where the walk stands (free observations are recorded in move order, each starting
-    where the previous one ended): space the tool has crossed, which no sample consistent with
+    the retreat), follows it back to its start, then earlier ones passing within ``step`` of
+    where the walk stands, each back to its start (free observations are recorded in move
+    order, each starting where the previous one ended, or, for a plan's first move, where the
+    executor's unrecorded retreat along the previous plan's last move left the tool, i.e. on
+    that move, not at its end): space the tool has crossed, which no sample consistent with
     the history intersects. Not a hot path: one walk over the history per plan.
     """
     free = np.flatnonzero(np.asarray(history.status) == Status.FREE)
@@ -116,8 +118,13 @@ def retrace(
         return None
     path = [start] if np.allclose(nearest[near[-1]], start) else [start, nearest[near[-1]]]
     for k in range(near[-1], -1, -1):
-        if k < near[-1] and np.linalg.norm(b[k] - path[-1]) > step:
-            continue
+        if k < near[-1]:
+            u = np.clip((path[-1] - a[k]) @ along[k] / max(along[k] @ along[k], 1e-18), 0, 1)
+            on = a[k] + u * along[k]  # the walk's nearest point on move k
+            if np.linalg.norm(on - path[-1]) > step:
+                continue
+            if u < 1 and not np.allclose(on, path[-1]):
+                path.append(on)
         path.append(a[k])
         if not space.blocked(a[k])[0]:
             return np.array(path)
