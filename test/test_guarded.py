@@ -1,5 +1,6 @@
 """Guarded-move executor logic in closed loop with the mock physics (no DDS)."""
 
+import copy
 import itertools
 
 import numpy as np
@@ -260,6 +261,26 @@ def test_lateral_compliance_makes_a_marginal_slope_slip_far():
         below = np.interp(sim.tool[0], slope[::-1, 0], slope[::-1, 1])
         assert sim.tool[1] >= below - 1e-9
     assert slides[500.0] < 0.01 < 0.05 < slides[25.0]
+
+
+def test_a_new_motion_direction_keeps_the_contact_force_continuous():
+    """After a slip on a 35 degree slope and a 2 cm retreat the laterally compliant arm is
+    still deflected across its motion (about 4 cm at 25 N/m). Turning to a new direction keeps
+    the force (bumpless): it used to jump to ~20 N in one step, 40 N after longer slides."""
+    angle = np.deg2rad(35.0)
+    slope = np.array([[np.cos(angle), -np.sin(angle)], [-np.cos(angle), np.sin(angle)]])
+    sim = PointToolSim(slope, False, 0.5, 500.0, [0.0, 0.1], 25.0, 0.3)  # config/mock.yaml's
+    while np.linalg.norm(sim.force) < 12.0:
+        sim.step([0.0, -0.03], 0.005)
+    anchor = sim.tool.copy()
+    while anchor[1] - sim.tool[1] > -0.02:
+        sim.step([0.0, 0.2], 0.005)
+    before = np.linalg.norm(sim.force)
+    assert 0.5 < before < 3.0 and np.linalg.norm(sim.setpoint - sim.tool) > 0.03  # deflected
+    for turn in ([1.0, 0.0], [-1.0, 0.0], [0.7071, -0.7071]):
+        turned = copy.deepcopy(sim)
+        turned.step(0.2 * np.array(turn), 0.005)
+        assert np.linalg.norm(turned.force) < before + 0.2 * 500.0 * 0.005 + 1e-9, turn
 
 
 def test_tool_slides_off_the_end_of_an_open_polyline():

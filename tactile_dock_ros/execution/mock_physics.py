@@ -13,6 +13,14 @@ the surface) and a tangential part f_t; Coulomb friction holds the tool while
 per second, clamped to the edge and stopped by any other edge on the way. Edges are oriented as
 in ``core.shape``: walking c -> d the solid is on the left, the outward normal on the right.
 The measured force is the environment's force on the tool, -K (s - p), zero in free space.
+
+Decision: when the stiff axis turns by more than 30 degrees (a new move; a reversal keeps the
+axis), the setpoint is re-anchored so that the force stays continuous (bumpless transfer, as an
+impedance controller switching its stiffness does). Steering within a move (the executor aims
+at the waypoint from where the tool is) keeps the old model. Without it a
+deflection built up across the motion under the weak lateral spring became a push along the
+stiff new direction at once: after a slide and the executor's retreat, 4 cm at 25 N/m (1.3 N)
+turned into 20 N in one step, and the node suite aborted at the 40 N limit (sloper seed 1).
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ import numpy as np
 from tactile_dock_ros.core.geometry2d import cross, outward_normal
 
 _EPS = 1e-9  # slack on segment parameters, dimensionless
+REANCHOR_COS = np.cos(np.deg2rad(30.0))  # turns of the stiff axis above 30 degrees re-anchor
 
 
 class PointToolSim:
@@ -106,7 +115,11 @@ class PointToolSim:
         velocity = np.asarray(velocity, float)
         speed = float(np.linalg.norm(velocity))
         if speed > 0:
+            turn = abs(float(velocity @ self.direction)) / speed  # |cos| of the turn
+            force = self.force
             self.direction = velocity / speed
+            if turn < REANCHOR_COS:  # a new move, not steering within one
+                self.setpoint = self.tool - np.linalg.solve(self.stiffness_matrix, force)
         self.setpoint = self.setpoint + velocity * dt
         edges, hit = self._hits(self.tool, self.setpoint)
         self.contact_edge = int(edges[0]) if len(edges) else None
