@@ -222,31 +222,6 @@ def test_force_filter_removes_the_bias_and_smooths_noise():
     np.testing.assert_allclose(flt.value, [0.0, 2.0], atol=0.3)
 
 
-def test_force_filter_keeps_the_bias_when_a_plan_starts_in_contact():
-    """Drift within max_bias_shift is taken; a 5 N contact at rest is not: the old bias stays,
-    the contact reads as 5 N and its release as 0 (taking it read the release as -5 N)."""
-    bias = np.array([0.4, -0.3])
-    flt = ForceFilter(cutoff_hz=50.0, bias_samples=5, max_bias_shift=2.0)
-    for i in range(5):
-        flt.add(i * 0.01, bias)
-    drift = bias + np.array([0.5, 0.0])
-    flt.reset()
-    for i in range(5):
-        flt.add(1 + i * 0.01, drift)
-    np.testing.assert_allclose(flt.bias, drift)
-    assert flt.kept_shift == 0.0
-    flt.reset()
-    for i in range(5):
-        flt.add(2 + i * 0.01, drift + np.array([0.0, 5.0]))
-    np.testing.assert_allclose(flt.bias, drift)
-    assert flt.kept_shift == pytest.approx(5.0)
-    for i in range(200):
-        flt.add(2.1 + i * 0.01, drift + np.array([0.0, 5.0]))
-    np.testing.assert_allclose(flt.value, [0.0, 5.0], atol=1e-6)
-    with pytest.raises(ValueError):
-        ForceFilter(cutoff_hz=5.0, bias_samples=5, max_bias_shift=-1.0)
-
-
 def test_mock_tool_sticks_inside_and_slides_outside_the_friction_cone():
     sim = PointToolSim(FLOOR, False, 0.5, 500.0, [0.0, 0.01])
     for _ in range(40):  # push down and 20 degrees sideways: inside the cone (26.6 degrees)

@@ -34,9 +34,7 @@ Decisions where the paper leaves the robot side open:
   c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
   something) or STICK / SLIP_LEFT / SLIP_RIGHT (the loading move).
 * After any contact that did not dock the tool retreats ``retreat_distance`` against the move
-  direction, so the next plan starts in free space and the F/T bias can be re-estimated
-  (``ForceFilter`` keeps the previous bias when the new one is far off: the tool may still
-  touch, e.g. wedged in a notch or held by a laterally deflected arm).
+  direction, so the next plan starts in free space and the F/T bias can be re-estimated.
 * Safety, checked before every command: sensor age, tool inside the workspace box, force below
   the limit, command speed below the limit, the next position (tool + v dt) inside the box, and
   a time budget per plan. Any violation stops the run with ABORTED and the reason.
@@ -380,29 +378,18 @@ class ForceFilter:
     """F/T bias removal and first-order low-pass filtering of a force vector (newtons).
 
     The bias is the mean of the first ``bias_samples`` readings after :meth:`reset` (the
-    executor resets at the start of every plan, with the tool at rest, meant to be in free
-    space). After that each reading updates ``value`` by an exponential filter with the given
-    cutoff: alpha = 1 - exp(-2 pi f_c dt), dt from the reading times.
-
-    Decision: an estimate more than ``max_bias_shift`` newtons from the previous bias is a tool
-    still touching something at rest, not drift: the previous bias is kept (``kept_shift``
-    tells by how much it was off). Taking it would hide that force, and when the tool then left
-    the contact its release read as a force of the opposite sign; on the mock's notch, wedged
-    starts piled up to 40 N phantom forces and the executor aborted.
+    executor resets at the start of every plan, with the tool at rest in free space). After
+    that each reading updates ``value`` by an exponential filter with the given cutoff:
+    alpha = 1 - exp(-2 pi f_c dt), dt from the reading times.
     """
 
-    def __init__(self, cutoff_hz: float, bias_samples: int, max_bias_shift: float = np.inf) -> None:
-        if cutoff_hz <= 0 or bias_samples < 1 or not max_bias_shift >= 0:
-            raise ValueError("cutoff_hz must be > 0, bias_samples >= 1 and max_bias_shift >= 0")
+    def __init__(self, cutoff_hz: float, bias_samples: int) -> None:
+        if cutoff_hz <= 0 or bias_samples < 1:
+            raise ValueError("cutoff_hz must be > 0 and bias_samples >= 1")
         self.cutoff_hz, self.bias_samples = cutoff_hz, bias_samples
-        self.max_bias_shift = float(max_bias_shift)
-        self.kept_shift = 0.0  # N: the last estimate's rejected shift (0: accepted); caller clears
-        self.bias = self._previous = None
         self.reset()
 
     def reset(self) -> None:
-        if self.bias is not None:
-            self._previous = self.bias
         self._bias_sum, self._count = 0.0, 0
         self.bias = None
         self.value = None  # an array shaped like the readings once the bias is known
@@ -418,12 +405,7 @@ class ForceFilter:
             self._bias_sum += force
             self._count += 1
             if self._count == self.bias_samples:
-                estimate = self._bias_sum / self._count
-                previous = self._previous
-                shift = 0.0 if previous is None else float(np.linalg.norm(estimate - previous))
-                if shift > self.max_bias_shift:
-                    self.kept_shift, estimate = shift, previous
-                self.bias = estimate
+                self.bias = self._bias_sum / self._count
                 self.value = np.zeros_like(self.bias)
             self._last_t = t
             return

@@ -84,15 +84,6 @@ PARAMS = [
     Param("filter_cutoff_hz", 20.0, "F/T low-pass cutoff", "Hz", 0.1, 1000.0),
     Param("bias_samples", 10, "F/T readings averaged for the bias at each plan start", "", 1, 1000),
     Param(
-        "max_bias_shift",
-        2.0,
-        "largest F/T bias change accepted between plans; a larger one is contact at rest and "
-        "the previous bias is kept",
-        "N",
-        0.0,
-        1000.0,
-    ),
-    Param(
         "producer_timeout",
         4.0,
         "stop the arm when no copy of the running plan (resent every 0.5 s) came for this long",
@@ -129,9 +120,7 @@ class ExecutorNode(Node):
             max_slide=self.p.max_slide,
             approach_gain=self.p.approach_gain,
         )
-        self.filter = ForceFilter(
-            self.p.filter_cutoff_hz, self.p.bias_samples, self.p.max_bias_shift
-        )
+        self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)
         self.dt = 1.0 / self.p.control_rate_hz
         self.tool: np.ndarray | None = None
         self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
@@ -172,13 +161,6 @@ class ExecutorNode(Node):
         now = now_seconds(self)
         self.health.streams["wrench"].add(now)
         self.filter.add(now, force)
-        if self.filter.kept_shift:
-            self.get_logger().warning(
-                f"F/T reading at plan start is {self.filter.kept_shift:.1f} N off the last bias "
-                f"(max_bias_shift {self.p.max_bias_shift:g} N): the tool touches something at "
-                "rest; keeping the last bias"
-            )
-            self.filter.kept_shift = 0.0
         run = self.run
         if run is not None and not run.done and self.filter.ready:  # stop now, not next tick
             total = float(np.linalg.norm(self.base_force()))
