@@ -222,6 +222,32 @@ def test_force_filter_removes_the_bias_and_smooths_noise():
     np.testing.assert_allclose(flt.value, [0.0, 2.0], atol=0.3)
 
 
+def test_a_blocked_retreat_stops_at_the_contact_threshold():
+    """The retreat backs off along -d; when a face resists it (force along +d above the
+    plan's 3 N threshold) it ends there instead of pushing on to the 40 N limit."""
+
+    def retreat(blocked_at):
+        plan = _plan([[0.0, 0.1], [0.0, -0.5], [0.5, -0.5]])  # a prefix move, then loading
+        run = GuardedRun(plan, np.array([0.0, 0.1]), LIMITS, SETTINGS, 0.0)
+        tool, t = np.array([0.0, 0.0]), 0.0
+        run.step(t, tool, np.array([0.0, 5.0]), 0.0)  # collided: the floor pushes back up
+        assert run._phase.value == "retreat"
+        peak = 0.0
+        while not run.done and t < 10:
+            t += DT
+            wall = max(tool[1] - blocked_at, 0.0) * 500.0  # a face above: pushes down (+d)
+            force = np.array([0.0, -wall])
+            peak = max(peak, wall)
+            tool = tool + run.step(t, tool, force, 0.0) * DT
+        return run, tool[1], peak
+
+    free, y, _ = retreat(1.0)
+    assert free.outcome is Outcome.CONTACT_FAILED and y == pytest.approx(0.02, abs=0.002)
+    blocked, y, peak = retreat(0.01)
+    assert blocked.outcome is Outcome.CONTACT_FAILED and "retreat blocked" in blocked.detail
+    assert y < 0.02 and peak < 3.0 + 500.0 * 0.1 * DT + 1e-9, peak
+
+
 def test_mock_tool_sticks_inside_and_slides_outside_the_friction_cone():
     sim = PointToolSim(FLOOR, False, 0.5, 500.0, [0.0, 0.01])
     for _ in range(40):  # push down and 20 degrees sideways: inside the cone (26.6 degrees)

@@ -34,7 +34,11 @@ Decisions where the paper leaves the robot side open:
   c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
   something) or STICK / SLIP_LEFT / SLIP_RIGHT (the loading move).
 * After any contact that did not dock the tool retreats ``retreat_distance`` against the move
-  direction, so the next plan starts in free space and the F/T bias can be re-estimated.
+  direction, so the next plan starts in free space and the F/T bias can be re-estimated. The
+  retreat is guarded too: a force above the contact threshold against it ends it early.
+  Before, a laterally compliant arm that had slid sideways could back into another face
+  unguarded: the mock's node suite drove a retreat at 0.2 m/s into a notch face up to the 40 N
+  limit (ABORTED) in 2 of 15 episodes per run.
 * Safety, checked before every command: sensor age, tool inside the workspace box, force below
   the limit, command speed below the limit, the next position (tool + v dt) inside the box, and
   a time budget per plan. Any violation stops the run with ABORTED and the reason.
@@ -313,9 +317,17 @@ class GuardedRun:
         return self._step_retreat(tool, 0.0)
 
     def _step_retreat(self, tool: np.ndarray, force: float) -> np.ndarray:
+        """Back off ``retreat_distance`` against the move, guarded like a move: a force above
+        the plan's contact threshold resisting the retreat (the way back is blocked: the tool
+        slid or was pulled sideways since it came) ends it where it is."""
         d = self._direction()
-        if (self._anchor - tool) @ d >= self.settings.retreat_distance:
+        moved = (self._anchor - tool) @ d
+        if moved >= self.settings.retreat_distance:
             self._finish(Outcome.CONTACT_FAILED, self.detail, tool)
+            return np.zeros(2)
+        if self._force @ d > self.plan.force_threshold:  # resists motion along -d
+            why = f"{self.detail}; retreat blocked after {max(moved, 0.0):.3f} m"
+            self._finish(Outcome.CONTACT_FAILED, why, tool)
             return np.zeros(2)
         return -d * self._speed
 
