@@ -344,7 +344,6 @@ class ChainRunner:
             raise ValueError(f"unknown MCMC method {method!r}; choose from {MCMC_METHODS}")
         self.system, self.method, self.rng = system, method, rng
         self.hmc_duration = self.duration = hmc_duration
-        self.last: dict = {}
         self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
         self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
 
@@ -366,11 +365,10 @@ class ChainRunner:
         only): (C, steps, m)."""
         if self.method == "hmc":
             for _ in range(burn_in):  # one move at a time: at most one at the full duration
-                z = self._hmc(z, 1)[:, -1]
-                self._adapt_duration()
-            return self._hmc(z, steps * thin)[:, thin - 1 :: thin]
-        for _ in range(burn_in):
-            z = self.step(z, adapt=True)
+                draws, stats = self._hmc(z, 1)
+                z = draws[:, -1]
+                self._adapt_duration(stats)
+            return self._hmc(z, steps * thin)[0][:, thin - 1 :: thin]
         for _ in range(burn_in):
             z = self.step(z, adapt=True)
         out = np.empty((len(z), steps, z.shape[1]))
@@ -380,23 +378,23 @@ class ChainRunner:
             out[:, i] = z
         return out
 
-    def _hmc(self, z: np.ndarray, moves: int) -> np.ndarray:
+    def _hmc(self, z: np.ndarray, moves: int) -> tuple[np.ndarray, dict]:
         draws, stats = hmc_chains(self.system, z, moves, self.rng, self.duration)
-        self.last = stats
         self.stats["bounces"] += stats["bounces"]
         self.stats["accepted"] += len(z) * moves - stats["rejected"]
         self.stats["proposed"] += len(z) * moves
-        return draws
+        return draws, stats
 
-    def _adapt_duration(self) -> None:
-        """After burn-in: the HMC move duration for the kept moves, from the burn-in's bounce
-        rate. Decision (the paper fixes T): in a thin posterior (many contacts on a sharp
-        depth prior) a T = pi/2 move needs thousands of bounces, so nearly every move hits
-        ``max_bounces`` and is rejected; chains then stay at their seeds (notch, depth prior:
-        136 of 160 moves rejected, 20 s per cycle, split R-hat 3.7). The duration becomes
+    def _adapt_duration(self, stats: dict) -> None:
+        """After each burn-in move: the HMC move duration for what follows, from that move's
+        bounce rate (``stats`` of ``hmc_chains``). Decision (the paper fixes T): in a thin
+        posterior (many contacts on a sharp depth prior) a T = pi/2 move needs thousands of
+        bounces, so nearly every move hits ``max_bounces`` and is rejected; chains then stay
+        at their seeds (notch, depth prior: 136 of 160 moves rejected, 20 s per cycle, split
+        R-hat 3.7). The duration becomes
         HMC_TARGET_BOUNCES / (bounces per rad), within [HMC_MIN_DURATION, hmc_duration]. It is
         fixed before any kept move, so the kept moves are plain HMC with that T."""
-        rate = self.last["bounces"] / max(self.last["travel"], 1e-12)
+        rate = stats["bounces"] / max(stats["travel"], 1e-12)
         shortest = min(HMC_MIN_DURATION, self.hmc_duration)
         wanted = HMC_TARGET_BOUNCES / max(rate, 1e-12)
         self.duration = float(np.clip(wanted, shortest, self.hmc_duration))

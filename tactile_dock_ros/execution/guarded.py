@@ -38,7 +38,7 @@ Decisions where the paper leaves the robot side open:
   retreat is guarded too: a force above the contact threshold against it ends it early.
   Before, a laterally compliant arm that had slid sideways could back into another face
   unguarded: the mock's node suite drove a retreat at 0.2 m/s into a notch face up to the 40 N
-  limit (ABORTED) in 2 of 15 episodes per run.
+  limit (ABORTED) in 1-2 of 15 episodes per run.
 * Safety, checked before every command: sensor age, tool inside the workspace box, force below
   the limit, command speed below the limit, the next position (tool + v dt) inside the box, and
   a time budget per plan. Any violation stops the run with ABORTED and the reason.

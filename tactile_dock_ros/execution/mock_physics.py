@@ -20,7 +20,7 @@ impedance controller switching its stiffness does). Steering within a move (the 
 at the waypoint from where the tool is) keeps the old model. Without it a
 deflection built up across the motion under the weak lateral spring became a push along the
 stiff new direction at once: after a slide and the executor's retreat, 4 cm at 25 N/m (1.3 N)
-turned into 20 N in one step, and the node suite aborted at the 40 N limit (sloper seed 1).
+turned into 19 N in one step (``test_a_new_motion_direction_keeps_the_contact_force_continuous``).
 """
 
 from __future__ import annotations
