@@ -6,6 +6,9 @@ import pytest
 from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.perception.mock_camera import depth_prior
+from tactile_dock_ros.tools import bringup
 
 
 def _truth(name, want_feasible, first_seed=0):
@@ -48,6 +51,23 @@ def test_infeasible_three_ledges_gives_up_once_its_slides_rule_out_every_hold():
     assert result.outcome == "gave_up", result.message
     assert result.cycles <= 5
     assert sum(c.rejected for c in result.cycles_log) > 0
+
+
+def test_infeasible_sloper_on_the_depth_prior_gives_up_without_compliance():
+    # benchmark truth 5, non-compliant: the planner re-planned a move already seen to slip
+    # (probsim's fit kept 0.2-1 %, no sample docks) and ran to the cap before whole_path_p_dock
+    problem = problems.get("sloper")
+    index = problems.names().index("sloper")
+    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 5]))
+    assert not simulate.feasible(problem, truth, compliant=False)
+    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
+    prior = depth_prior(truth, config, np.random.default_rng([0, index, 5, 2])).prior
+    rng = np.random.default_rng([0, index, 5, 1])
+    result = explore.run_episode(problem, truth, "ours", rng, 10, compliant=False, prior=prior)
+    assert result.outcome == "gave_up", result.message
+    assert "whole path" in result.message
+    aims = [tuple(np.round(c.plan.target_point, 3)) for c in result.cycles_log[:-1]]
+    assert len(set(aims)) == len(aims)  # no docking site tried twice
 
 
 def test_same_seed_same_episode():

@@ -280,6 +280,35 @@ def capped_p_dock(stop_vertex, stop_edge, holding) -> np.ndarray:
     return np.clip(edges + np.minimum(stop_vertex, q_vertex).sum(axis=(-2, -1)), 0.0, 1.0)
 
 
+def whole_path_p_dock(
+    posterior: GaussianShape,
+    samples: np.ndarray,
+    path: np.ndarray,
+    load: np.ndarray,
+    compliant: bool,
+    holding: tuple[np.ndarray, np.ndarray],
+) -> float:
+    """P_dock of a whole path (L, 2): probsim's estimate under ``posterior`` (the terminal
+    move's P_dock times P(the prefix touches nothing)), capped per feature
+    (``capped_p_dock``), and 0 when the path docks on none of the ``samples`` (N, n, 2).
+
+    Decision: the per-feature cap cannot see that a feature some samples let hold lies, in
+    exactly those samples, where this path does not stop on it. A repeat of a move already
+    seen to slip then kept 0.2-1 % (non-compliant sloper, depth prior: the same slip point
+    was re-planned 3 times in 12 cycles and the episode never gave up) while eq. (19)'s
+    estimator, over samples that satisfy the history, says 0. As for the cap, the
+    resolution is 1/N.
+    """
+    whole = probsim.dock_probability(posterior, path, load, compliant)
+    p_dock = float(capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding))
+    if p_dock == 0.0:
+        return 0.0
+    docks = simulate.dock_outcomes(
+        samples, posterior.closed, path, posterior.friction, load, compliant
+    )
+    return p_dock if docks.any() else 0.0
+
+
 def evaluate(
     posterior: GaussianShape,
     segments: dict[str, np.ndarray],
@@ -429,9 +458,7 @@ def plan(
         path = path[np.r_[True, np.any(np.diff(path, axis=0) != 0, axis=1)]]
         if space.touches_outline(path[len(lead) - 1 : -1]):  # the lead is known or made free
             continue
-        # The whole path's estimate: the terminal move's P_dock times P(prefix touches nothing).
-        whole = probsim.dock_probability(posterior, path, load, compliant)
-        p_dock = float(capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding))
+        p_dock = whole_path_p_dock(posterior, samples, path, load, compliant, holding)
         if objective != "info_gain" and p_dock < config.give_up_threshold:
             unreachable.append(p_dock)
             continue
