@@ -248,6 +248,64 @@ def test_a_blocked_retreat_stops_at_the_contact_threshold():
     assert y < 0.02 and peak < 3.0 + 500.0 * 0.1 * DT + 1e-9, peak
 
 
+@pytest.mark.parametrize("wall", ["released", "pressing", "jammed", "growing"])
+def test_a_tool_still_pressed_after_the_retreat_moves_along_the_force_until_released(wall):
+    """A soft-across arm can end the retreat pressed sideways against a face (3 N along +x,
+    across the move): the next plan's F/T bias would absorb it. The tool then moves along
+    the force until it falls to a quarter of the 3 N threshold (``released``: at x = 6 mm),
+    for at most the retreat distance (``pressing``: never) or the time that takes plus 1 s
+    (``jammed``: the tool cannot move), with that time added to the plan's budget (here
+    nearly spent at the contact): no abort. A force that grows on the way (``growing``: the
+    reading does not point out of the surface) ends it at once."""
+    plan = _plan([[0.0, 0.1], [0.0, -0.5], [0.5, -0.5]])
+    run = GuardedRun(plan, np.array([0.0, 0.1]), LIMITS, SETTINGS, 0.0)
+    budget = 3 * 1.1 / 0.1 + SETTINGS.time_margin  # 3 x path length / speed + margin, s
+    tool, t = np.array([0.0, 0.0]), budget - 0.3
+    run.step(t, tool, np.array([3.0, 4.0]), 0.0)  # collided on the prefix move
+    pressed_until = 0.006 if wall == "released" else np.inf
+    force, released_at = np.zeros(2), None
+    while not run.done and t < budget + 10:
+        t += DT
+        force = np.array([3.0 if tool[0] < pressed_until else 0.0, 0.0])
+        if wall == "growing":
+            force[0] += 100.0 * tool[0]  # 1 N per cm moved
+        velocity = run.step(t, tool, force, 0.0)
+        if wall != "jammed" or velocity[0] == 0.0:  # jammed: no way along +x
+            tool = tool + velocity * DT
+        released_at = t if run.done else released_at
+    assert run.outcome is Outcome.CONTACT_FAILED, run.detail
+    assert tool[1] == pytest.approx(SETTINGS.retreat_distance, abs=0.003)  # retreated first
+    if wall == "released":
+        assert "released after" in run.detail and np.linalg.norm(force) == 0.0
+        assert 0.006 <= tool[0] < 0.007
+    elif wall == "growing":
+        assert "grew to 3.0 N in contact after 0.000 m" in run.detail, run.detail
+        assert 0.0 < tool[0] < 0.001
+    else:
+        assert "still 3.0 N in contact" in run.detail
+        moved = SETTINGS.retreat_distance if wall == "pressing" else 0.0
+        assert tool[0] == pytest.approx(moved, abs=0.001)
+        # pressing: the distance at the loading speed; jammed: that time plus 1 s
+        assert released_at - (budget - 0.3) < 0.2 + 1.0 + (wall == "jammed") + 0.1
+
+
+def test_a_retreat_blocked_at_once_releases_along_the_force():
+    """The contact force already pushes along the move (something behind the tool: in the
+    node suite, a plan started pressed against a face): the retreat is blocked at 0 m and the
+    tool moves along the force, here free 5 mm further on."""
+    plan = _plan([[0.0, 0.1], [0.0, -0.5], [0.5, -0.5]])
+    run = GuardedRun(plan, np.array([0.0, 0.1]), LIMITS, SETTINGS, 0.0)
+    tool, t = np.array([0.0, 0.0]), 0.0
+    run.step(t, tool, np.array([0.0, -4.0]), 0.0)  # 4 N along the move d = (0, -1)
+    assert run._phase.value == "release"
+    while not run.done and t < 10:
+        t += DT
+        force = np.array([0.0, -4.0 if tool[1] > -0.005 else 0.0])
+        tool = tool + run.step(t, tool, force, 0.0) * DT
+    assert "retreat blocked after 0.000 m; released after 0.005 m" in run.detail
+    assert run.outcome is Outcome.CONTACT_FAILED and -0.006 < tool[1] <= -0.005
+
+
 def test_mock_tool_sticks_inside_and_slides_outside_the_friction_cone():
     sim = PointToolSim(FLOOR, False, 0.5, 500.0, [0.0, 0.01])
     for _ in range(40):  # push down and 20 degrees sideways: inside the cone (26.6 degrees)

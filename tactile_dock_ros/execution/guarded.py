@@ -36,6 +36,8 @@ Decisions where the paper leaves the robot side open:
 * After any contact that did not dock the tool retreats ``retreat_distance`` against the move
   direction, so the next plan starts in free space and the F/T bias can be re-estimated. The
   retreat is guarded too: a force above the contact threshold against it ends it early.
+  A tool still pressed against a surface after the retreat (more than ``RELEASED`` times the
+  contact threshold) then moves along the measured force until it is released (``_step_release``).
   Before, a laterally compliant arm that had slid sideways could back into another face
   unguarded: the mock's node suite drove a retreat at 0.2 m/s into a notch face up to the 40 N
   limit (ABORTED) in 1-2 of 15 episodes per run.
@@ -87,11 +89,15 @@ class Settings:
     max_slide: float = 0.3  # a compliant slide longer than this fails
 
 
+RELEASED = 0.25  # a tool feeling less than this fraction of the contact threshold is free
+
+
 class _Phase(Enum):
     MOVE = "move"
     LOAD_TEST = "load test"
     SLIDE = "compliant slide"
     RETREAT = "retreat"
+    RELEASE = "release"
     DONE = "done"
 
 
@@ -146,6 +152,8 @@ class GuardedRun:
     _slip: Status | None = None  # first-contact status of a compliant slide
     _still: tuple = ()  # (position, since seconds): where a compliant slide last rested
     _trace: list = field(default_factory=list)  # tool positions on the surface while sliding
+    _release_until: float = 0.0  # seconds: when a release that makes no way ends
+    _release_limit: float = 0.0  # newtons: a release that meets more force than this ends
 
     def __post_init__(self) -> None:
         tool = np.asarray(self.tool, float)
@@ -209,6 +217,7 @@ class GuardedRun:
             _Phase.LOAD_TEST: self._step_load_test,
             _Phase.SLIDE: self._step_slide,
             _Phase.RETREAT: self._step_retreat,
+            _Phase.RELEASE: self._step_release,
         }[self._phase](tool, magnitude)
         speed = float(np.linalg.norm(velocity))
         if speed > self._speed * (1 + 1e-9):
@@ -314,22 +323,67 @@ class GuardedRun:
         self._phase = _Phase.RETREAT
         self._anchor = tool.copy()
         self.detail = why
-        return self._step_retreat(tool, 0.0)
+        return self._step_retreat(tool, float(np.linalg.norm(self._force)))
 
     def _step_retreat(self, tool: np.ndarray, force: float) -> np.ndarray:
         """Back off ``retreat_distance`` against the move, guarded like a move: a force above
         the plan's contact threshold resisting the retreat (the way back is blocked: the tool
-        slid or was pulled sideways since it came) ends it where it is."""
+        slid or was pulled sideways since it came) ends it where it is. Either way the contact
+        is then released if the tool still feels it (``_step_release``)."""
         d = self._direction()
         moved = (self._anchor - tool) @ d
         if moved >= self.settings.retreat_distance:
+            return self._start_release(tool, force, "")
+        if self._force @ d > self.plan.force_threshold:  # resists motion along -d
+            return self._start_release(
+                tool, force, f"; retreat blocked after {max(moved, 0.0):.3f} m"
+            )
+        return -d * self._speed
+
+    def _start_release(self, tool: np.ndarray, force: float, note: str) -> np.ndarray:
+        """After the retreat: done if the tool is free, else release the contact."""
+        self.detail += note
+        if force <= RELEASED * self.plan.force_threshold:
             self._finish(Outcome.CONTACT_FAILED, self.detail, tool)
             return np.zeros(2)
-        if self._force @ d > self.plan.force_threshold:  # resists motion along -d
-            why = f"{self.detail}; retreat blocked after {max(moved, 0.0):.3f} m"
+        self._phase, self._anchor = _Phase.RELEASE, tool.copy()
+        self._release_limit = max(force, self.plan.force_threshold)
+        release_time = self.settings.retreat_distance / min(self.settings.load_speed, self._speed)
+        self._release_until = self._t + release_time + 1.0
+        self._budget = max(self._budget, self._release_until - self.t_start + 1.0)
+        return self._step_release(tool, force)
+
+    def _step_release(self, tool: np.ndarray, force: float) -> np.ndarray:
+        """Move along the contact force (away from what pushes the tool) at the loading speed
+        until it falls to ``RELEASED`` times the plan's contact threshold, for at most
+        ``retreat_distance`` or the time that takes plus 1 s (a jammed tool does not move; the
+        plan's time budget grows to cover it). It is guarded: a force growing above the larger of
+        its start value and the contact threshold (the reading does not point out of the
+        surface: a second face, or a bias error) ends it ("grew to ... N").
+
+        Decision: an arm that is soft across its motion can end the retreat still pressed
+        against a face (it slid sideways on contact, or the way back was blocked). The node
+        suite's notch episodes then started the next plan in contact: its F/T bias, taken at
+        the plan start, absorbed 1.4-3.9 N, the first move "collided" at once, its retreat was
+        blocked at 0.000 m, and the planner gave up with the tool in the likely-obstacle region.
+        The measured force points out of the surface (within the friction cone of its normal),
+        so moving along it separates the tool; the release is not recorded as evidence. What
+        it leaves (at most a quarter of the threshold, 0.75 N at the mock's 3 N) is the next
+        plan's bias error; half the threshold left 0.8 N in a bias in the node suite.
+        """
+        moved = float(np.linalg.norm(tool - self._anchor))
+        if force <= RELEASED * self.plan.force_threshold:
+            self._finish(
+                Outcome.CONTACT_FAILED, f"{self.detail}; released after {moved:.3f} m", tool
+            )
+            return np.zeros(2)
+        grew = force > self._release_limit
+        if grew or moved >= self.settings.retreat_distance or self._t >= self._release_until:
+            how = "grew to" if grew else "still"
+            why = f"{self.detail}; {how} {force:.1f} N in contact after {moved:.3f} m of release"
             self._finish(Outcome.CONTACT_FAILED, why, tool)
             return np.zeros(2)
-        return -d * self._speed
+        return self._force / force * min(self.settings.load_speed, self._speed)
 
     # ------------------------------------------------------------------ evidence
 
