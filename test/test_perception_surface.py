@@ -7,6 +7,7 @@ import pytest
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.geometry2d import cross
+from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.perception import evaluation, scenes
 from tactile_dock_ros.perception.config import (
     DepthNoise,
@@ -107,7 +108,7 @@ def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
     }
     std_old, corr_old = evaluation.edge_angle_stats(priors["independent"])
     std_new, corr_new = evaluation.edge_angle_stats(priors["correlated"])
-    assert np.median(corr_old) < 0 < 0.3 < np.median(corr_new)
+    assert np.median(corr_old) < 0 < np.median(corr_new)
     assert np.median(std_new) < 0.5 * np.median(std_old)
     # Condition the surface columns on one face vertex lying 2 mm off along its normal: its
     # neighbour follows it in the correlated model (one face), not in the independent one.
@@ -122,20 +123,35 @@ def test_neighbouring_edges_are_correlated_and_evidence_moves_neighbours():
         normal = np.array([edge[1], -edge[0]]) / np.linalg.norm(edge)
         a = normal @ A[20]
         moved[model] = 0.002 * (normal @ A[21] @ a) / (a @ a)
-    assert moved["correlated"] > 0.001 and abs(moved["independent"]) < 1e-4, moved
+    assert moved["correlated"] > 0.0008 and abs(moved["independent"]) < 1e-4, moved
 
 
 def test_coverage_in_band_and_nll_beats_the_independent_model():
-    """30 terrains (18 random walls, 4 truths per problem) with drawn calibration errors."""
+    """30 terrains (18 random walls, 4 truths per problem) with drawn calibration errors: the
+    points and the seen edges' directions are covered (0.954 here; with the earlier
+    ``bend_sigma_rad`` 0.05 the directions were overconfident: 0.909)."""
     rows = [
         bench_prior.score_terrain(truth, CONFIG, K, "16UC1", 11 * i)
         for i, (_, truth) in enumerate(bench_prior.terrains(18, 4, seed=3))
     ]
     covered = sum(r["correlated"]["covered"] for r in rows)
     assert 0.93 <= covered / sum(r["correlated"]["points"] for r in rows) <= 0.99
+    angles = sum(r["correlated"]["angles_covered"] for r in rows)
+    assert 0.93 <= angles / sum(r["correlated"]["angles"] for r in rows) <= 0.99
     old, new = (np.array([r[m]["nll_per_vertex"] for r in rows]) for m in bench_prior.MODELS)
     assert new.mean() < old.mean() - 1.0, (old.mean(), new.mean())
     assert np.mean(new < old) >= 0.8
+
+
+def test_edge_angle_errors_are_the_chord_turn_over_the_direction_std():
+    """One 1 m edge whose far end moves 1 cm along the normal per unit z: direction std
+    0.01 rad; a truth chord turned by 0.02 rad is 2 std off, a NaN end is skipped."""
+    prior = GaussianShape(
+        np.array([0.0, 0.0, 1.0, 0.0, 2.0, 0.0]), np.array([[0, 0, 0, 0.01, 0, 0.0]]).T
+    )
+    turned = np.array([[0.0, 0.0], [np.cos(0.02), np.sin(0.02)], [np.nan, np.nan]])
+    z = evaluation.edge_angle_errors(prior, turned)
+    assert z.shape == (1,) and abs(z[0]) == pytest.approx(2.0, rel=1e-3)
 
 
 def test_matched_truth_undoes_the_calibration_error():

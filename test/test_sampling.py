@@ -499,7 +499,8 @@ def test_an_inconsistent_history_is_pruned_until_it_fits():
     truth = problem.sample_ground_truth(np.random.default_rng([0, index, 2]))
     config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
     untailed = dataclasses.replace(config.occlusion, tail_m=0.0)  # the episode's prior had none
-    config = dataclasses.replace(config, occlusion=untailed)
+    stiffer = dataclasses.replace(config.surface, bend_sigma_rad=0.05)  # and the stop-19 value
+    config = dataclasses.replace(config, occlusion=untailed, surface=stiffer)
     prior = depth_prior(truth, config, np.random.default_rng([0, index, 2, 2])).prior
     data = np.load(Path(__file__).parent / "data/sloper2_depth_history.npz")
     history = History(data["a"], data["b"], data["status"])

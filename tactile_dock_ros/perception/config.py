@@ -33,7 +33,7 @@ YAML / dict format (every key optional except ``extrinsic.T_plane_camera``)::
     surface:                # how the visible slice's vertices deviate from the true surface
       depth_model: correlated            # or independent: one-pixel std per vertex (old model)
       quantization_m: 0.001              # depth resolution of the image (16UC1: 1 mm)
-      bend_sigma_rad: 0.05               # std of the true surface's turn at a vertex
+      bend_sigma_rad: 0.1                # std of the true surface's turn at a vertex
       corner_threshold: 2.0              # measured turns beyond this many noise stds are corners
       variance_kept: 0.995               # eigen-columns kept per visible run (fraction of trace)
     friction: 0.5                         # Coulomb coefficient given to the prior
@@ -174,7 +174,7 @@ class SurfaceParams:
 
     depth_model: str = "correlated"
     quantization_m: float = 0.001
-    bend_sigma_rad: float = 0.05
+    bend_sigma_rad: float = 0.1
     corner_threshold: float = 2.0
     variance_kept: float = 0.995
 

@@ -197,3 +197,21 @@ def edge_angle_stats(prior: GaussianShape) -> tuple[np.ndarray, np.ndarray]:
     std = np.linalg.norm(rows, axis=1)
     corr = np.sum(rows[:-1] * rows[1:], axis=1) / np.maximum(std[:-1] * std[1:], 1e-300)
     return std, corr
+
+
+def edge_angle_errors(prior: GaussianShape, truth: np.ndarray) -> np.ndarray:
+    """(k,) standardized direction errors of the edges whose both ends have a matched truth
+    point (``truth`` (n, 2) from ``matched_truth``, NaN rows skipped): the wrapped angle from
+    the mean edge to the chord of the two matched points, over the edge's linearized direction
+    std (``edge_angle_stats``, calibration included).
+
+    Decision: the point scores above cannot see a prior that is sharp in direction and wrong
+    there (faces 4-5 cm long blurred by 2 cm bins: notch's holds); a hold is decided by an
+    edge's direction against the friction cone, so its calibration is checked directly.
+    """
+    e = np.diff(prior.mean_vertices, axis=0)
+    chord = np.diff(np.asarray(truth, float), axis=0)
+    ok = np.all(np.isfinite(chord), axis=1)
+    turn = np.arctan2(cross(e[ok], chord[ok]), np.sum(e[ok] * chord[ok], axis=1))
+    std, _ = edge_angle_stats(prior)
+    return turn / np.maximum(std[ok], 1e-12)

@@ -9,11 +9,14 @@ and ``perceive`` builds both priors from the same image and the same occlusion s
 ``depth_model: independent`` (the original) and ``correlated`` (default). Reported per model:
 pooled 2-sigma band coverage of the truth points the prior spans (``evaluation.coverage``:
 in view and between the prior's ends along the truth, 1 cm apart, split into seen and hidden;
-target [0.93, 0.99]); the Gaussian NLL per vertex and the energy score of the truth points
-matched to the seen mean vertices (``evaluation.matched_truth``: the drawn calibration motion
-applied, then along the vertex normal onto the truth; ``evaluation.deviation_score``; lower is
-better, also compared per terrain); the number of basis columns, the median per-edge angle
-std and the median correlation of neighbouring edges' angles. Deterministic per
+target [0.93, 0.99]); the pooled 2-sigma coverage of the seen edges' directions
+(``evaluation.edge_angle_errors``: the chord between two matched truth points against the
+edge's direction std; a hold is decided by a direction); the Gaussian NLL per vertex and the
+energy score of the truth points matched to the seen mean vertices
+(``evaluation.matched_truth``: the drawn calibration motion applied, then along the vertex
+normal onto the truth; ``evaluation.deviation_score``; lower is better, also compared per
+terrain); the number of basis columns, the median per-edge angle std and the median
+correlation of neighbouring edges' angles. Deterministic per
 ``--seed``; ``--repeats`` is unused (nothing is timed).
 """
 
@@ -108,11 +111,14 @@ def score_terrain(
         seen = evaluation.visible_from(truth, result.slice.camera_xy, pts)
         inside = evaluation.band_distance(prior, pts) <= 2.0
         std, corr = evaluation.edge_angle_stats(prior)
+        angle_z = evaluation.edge_angle_errors(prior, matched)
         out[model] = {
             "covered": frac * count,
             "points": count,
             "covered_visible": int(np.sum(inside & seen)),
             "points_visible": int(np.sum(seen)),
+            "angles_covered": int(np.sum(np.abs(angle_z) <= 2.0)),
+            "angles": len(angle_z),
             **score,
             "columns": int(prior.n_basis),
             "vertices": int(prior.n_vertices),
@@ -131,6 +137,8 @@ def summarize(rows: list[dict], model: str, kinds: list[str]) -> dict:
         / max(sum(s["points_visible"] for s in sel), 1),
         "coverage_2sigma_hidden": sum(s["covered"] - s["covered_visible"] for s in sel)
         / max(sum(s["points"] - s["points_visible"] for s in sel), 1),
+        "angle_coverage_2sigma": sum(s["angles_covered"] for s in sel)
+        / max(sum(s["angles"] for s in sel), 1),
         "mean_nll_per_vertex": float(np.mean([s["nll_per_vertex"] for s in sel])),
         "mean_energy_m": float(np.mean([s["energy_m"] for s in sel])),
         "median_columns": float(np.median([s["columns"] for s in sel])),
@@ -158,7 +166,7 @@ def run(args) -> dict:
     groups = {"all": kinds, **{k: [k] for k in kinds}}
     summary = {}
     head = f"{'terrains':<14}{'n':>4}  {'coverage':>13}  {'seen':>13}  {'hidden':>13}"
-    head += f"  {'NLL/vertex':>15}"
+    head += f"  {'edge angles':>13}  {'NLL/vertex':>15}"
     head += f"  {'energy mm':>13}"
     print(head + f"  {'columns':>9}  {'edge angle std':>15}  {'adj corr':>11}   (old / new)")
     for group, members in groups.items():
@@ -186,6 +194,7 @@ def run(args) -> dict:
             f"  {old['coverage_2sigma']:5.3f} / {new['coverage_2sigma']:.3f}"
             f"  {old['coverage_2sigma_visible']:5.3f} / {new['coverage_2sigma_visible']:.3f}"
             f"  {old['coverage_2sigma_hidden']:5.3f} / {new['coverage_2sigma_hidden']:.3f}"
+            f"  {old['angle_coverage_2sigma']:5.3f} / {new['angle_coverage_2sigma']:.3f}"
             f"  {old['mean_nll_per_vertex']:6.2f} / {new['mean_nll_per_vertex']:6.2f}"
             f"  {1e3 * old['mean_energy_m']:5.2f} / {1e3 * new['mean_energy_m']:5.2f}"
             f"  {old['median_columns']:4.0f} / {new['median_columns']:<4.0f}"
