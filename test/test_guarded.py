@@ -289,6 +289,20 @@ def test_a_tool_still_pressed_after_the_retreat_moves_along_the_force_until_rele
         assert released_at - (budget - 0.3) < 0.2 + 1.0 + (wall == "jammed") + 0.1
 
 
+def test_released_fraction_sets_when_a_pressed_tool_counts_as_free():
+    """With ``released_fraction`` 1 the 3 N left after the retreat is within the 3 N threshold:
+    no release (the default 0.25 releases it, test above)."""
+    plan = _plan([[0.0, 0.1], [0.0, -0.5], [0.5, -0.5]])
+    lenient = Settings(released_fraction=1.0)
+    run = GuardedRun(plan, np.array([0.0, 0.1]), LIMITS, lenient, 0.0)
+    tool, t = np.array([0.0, 0.0]), 0.0
+    run.step(t, tool, np.array([3.0, 4.0]), 0.0)
+    while not run.done and t < 10:
+        t += DT
+        tool = tool + run.step(t, tool, np.array([3.0, 0.0]), 0.0) * DT
+    assert run.detail == "collided on move 1" and tool[0] == 0.0
+
+
 def test_a_retreat_blocked_at_once_releases_along_the_force():
     """The contact force already pushes along the move (something behind the tool: in the
     node suite, a plan started pressed against a face): the retreat is blocked at 0 m and the

@@ -36,8 +36,9 @@ Decisions where the paper leaves the robot side open:
 * After any contact that did not dock the tool retreats ``retreat_distance`` against the move
   direction, so the next plan starts in free space and the F/T bias can be re-estimated. The
   retreat is guarded too: a force above the contact threshold against it ends it early.
-  A tool still pressed against a surface after the retreat (more than ``RELEASED`` times the
-  contact threshold) then moves along the measured force until it is released (``_step_release``).
+  A tool still pressed against a surface after the retreat (more than ``released_fraction`` of
+  the contact threshold) then moves along the measured force until it is released
+  (``_step_release``).
   Before, a laterally compliant arm that had slid sideways could back into another face
   unguarded: the mock's node suite drove a retreat at 0.2 m/s into a notch face up to the 40 N
   limit (ABORTED) in 1-2 of 15 episodes per run.
@@ -87,9 +88,7 @@ class Settings:
     time_margin: float = 5.0  # time budget = 3 * path length / speed + margin
     settle_time: float = 0.3  # a compliant slide is stuck after holding still this long
     max_slide: float = 0.3  # a compliant slide longer than this fails
-
-
-RELEASED = 0.25  # a tool feeling less than this fraction of the contact threshold is free
+    released_fraction: float = 0.25  # below this fraction of the contact threshold: free
 
 
 class _Phase(Enum):
@@ -343,7 +342,7 @@ class GuardedRun:
     def _start_release(self, tool: np.ndarray, force: float, note: str) -> np.ndarray:
         """After the retreat: done if the tool is free, else release the contact."""
         self.detail += note
-        if force <= RELEASED * self.plan.force_threshold:
+        if force <= self.settings.released_fraction * self.plan.force_threshold:
             self._finish(Outcome.CONTACT_FAILED, self.detail, tool)
             return np.zeros(2)
         self._phase, self._anchor = _Phase.RELEASE, tool.copy()
@@ -355,7 +354,7 @@ class GuardedRun:
 
     def _step_release(self, tool: np.ndarray, force: float) -> np.ndarray:
         """Move along the contact force (away from what pushes the tool) at the loading speed
-        until it falls to ``RELEASED`` times the plan's contact threshold, for at most
+        until it falls to ``released_fraction`` of the plan's contact threshold, for at most
         ``retreat_distance`` or the time that takes plus 1 s (a jammed tool does not move; the
         plan's time budget grows to cover it). It is guarded: a force growing above the larger of
         its start value and the contact threshold (the reading does not point out of the
@@ -372,7 +371,7 @@ class GuardedRun:
         plan's bias error; half the threshold left 0.8 N in a bias in the node suite.
         """
         moved = float(np.linalg.norm(tool - self._anchor))
-        if force <= RELEASED * self.plan.force_threshold:
+        if force <= self.settings.released_fraction * self.plan.force_threshold:
             self._finish(
                 Outcome.CONTACT_FAILED, f"{self.detail}; released after {moved:.3f} m", tool
             )

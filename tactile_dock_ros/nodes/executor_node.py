@@ -73,6 +73,14 @@ PARAMS = [
     _tuning("retreat_distance", "back-off after a failed contact", "m", 0.0, 0.2),
     _tuning("settle_time", "compliant slide: held this still under load = stuck", "s", 0.0, 10.0),
     _tuning("max_slide", "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
+    _tuning(
+        "released_fraction",
+        "after the retreat the tool moves along the force until it is below this fraction of "
+        "the plan's contact threshold",
+        "",
+        0.01,
+        1.0,
+    ),
     _tuning("approach_gain", "speed = min(max, gain * distance to waypoint)", "1/s", 0.1, 100.0),
     Param(
         "wrench_frame",
@@ -118,6 +126,7 @@ class ExecutorNode(Node):
             retreat_distance=self.p.retreat_distance,
             settle_time=self.p.settle_time,
             max_slide=self.p.max_slide,
+            released_fraction=self.p.released_fraction,
             approach_gain=self.p.approach_gain,
         )
         self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)
