@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import simulate
+from .geometry2d import cross
 from .history import History, Status
 
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
@@ -47,7 +48,7 @@ def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status
     push = np.asarray(push, float)
     piece = ends - starts
     length = np.linalg.norm(piece, axis=1)
-    sine = np.abs(piece @ np.array([push[1], -push[0]])) / np.where(length > 0, length, 1.0)
+    sine = np.abs(cross(piece, push)) / np.where(length > 0, length, 1.0)
     keep = sine >= MIN_PIECE_SINE
     middle = 0.5 * (starts[keep] + ends[keep])
     half = 0.5 * contact_resolution * push
