@@ -24,6 +24,34 @@ def test_docking_bench_small(tmp_path):
         assert (row["later_cycle_seconds_median"] is None) == (not later)
     ours, gw = report["results"]
     assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
+    calibration = {row["strategy"]: row for row in report["attempt_calibration"]}
+    for row in report["results"]:
+        cal = calibration[row["strategy"]]
+        assert cal["attempts"] == sum(e["cycles"] for e in row["episodes"])
+        assert cal["docked_fraction"] * cal["attempts"] == pytest.approx(
+            sum(e["docked"] for e in row["episodes"])
+        )
+        assert sum(b["attempts"] for b in cal["bins"]) == cal["attempts"]
+        assert 0.0 <= cal["brier"] <= 1.0
+
+
+def test_attempt_calibration_scores_only_executed_attempts():
+    """A docked episode's last attempt docked; a give-up's final plan was never executed; the
+    bins split at CALIBRATION_BINS and P_dock 1 falls in the last."""
+    episodes = [
+        {"p_dock": [0.15, 0.95], "cycles": 2, "docked": True},
+        {"p_dock": [0.15, 0.12, 1e-4], "cycles": 2, "docked": False},  # gave up after two
+        {"p_dock": [1.0], "cycles": 1, "docked": False},  # the cycle cap
+    ]
+    row = {"prior": "depth", "mode": "compliant", "strategy": "ours", "episodes": episodes}
+    (cal,) = docking.attempt_calibration([row])
+    assert cal["attempts"] == 5 and cal["docked_fraction"] == pytest.approx(0.2)
+    assert cal["predicted_mean"] == pytest.approx((0.15 + 0.95 + 0.15 + 0.12 + 1.0) / 5)
+    assert cal["brier"] == pytest.approx((0.15**2 + 0.05**2 + 0.15**2 + 0.12**2 + 1.0) / 5)
+    bins = {(b["low"], b["high"]): b for b in cal["bins"]}
+    assert set(bins) == {(0.1, 0.2), (0.9, 1.0)}
+    assert bins[(0.1, 0.2)]["attempts"] == 3 and bins[(0.1, 0.2)]["docked"] == 0.0
+    assert bins[(0.9, 1.0)]["attempts"] == 2 and bins[(0.9, 1.0)]["docked"] == 0.5
 
 
 def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):

@@ -15,7 +15,14 @@ Reported per problem, prior, mode and strategy: feasible count, success on feasi
 cycles on feasible truths (mean, std, max), how infeasible truths end (the planner's give-up,
 its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's, and
 the wall time of one cycle (inference + planning): median over all cycles, over the cycles
-after each episode's first (with a history), and the maximum. With ``--workers N`` episodes run
+after each episode's first (with a history), and the maximum.
+
+Also reported, per prior, mode and strategy (problems pooled): how well the planner's predicted
+P_dock of each executed attempt matched what happened (``attempt_calibration``): the attempts,
+their mean prediction, the fraction that docked, the Brier score and a reliability table. A
+planner that keeps predicting 15 % for attempts that dock 4 % of the time keeps exploring an
+infeasible terrain: the table measures that overconfidence instead of leaving it to be guessed
+from the give-up counts. With ``--workers N`` episodes run
 in N processes (per-episode seeds do not depend on N); cycle times are then per process on a
 machine running N episodes at once. Episodes are the repetitions: ``--repeats`` is not used.
 """
@@ -226,6 +233,78 @@ def _summary(episodes: list[dict]) -> dict:
     }
 
 
+CALIBRATION_BINS = (0.0, 0.1, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
+
+
+def _attempts(episode: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted P_dock (k,) of the executed attempts and whether each docked (k,): only the
+    last attempt of a docked episode did (a give-up's final plan was not executed)."""
+    predicted = np.asarray(episode["p_dock"][: episode["cycles"]], float)
+    docked = np.zeros(len(predicted))
+    if episode["docked"] and len(docked):
+        docked[-1] = 1.0
+    return predicted, docked
+
+
+def attempt_calibration(results: list[dict]) -> list[dict]:
+    """Per (prior, mode, strategy), problems pooled: attempts, mean predicted P_dock, fraction
+    docked, Brier score (mean squared difference, lower is better) and per bin of
+    CALIBRATION_BINS (the last bin includes 1) the attempts, mean prediction and docked
+    fraction."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in results:
+        groups.setdefault((row["prior"], row["mode"], row["strategy"]), []).extend(row["episodes"])
+    out = []
+    for (prior, mode, strategy), episodes in groups.items():
+        pairs = [_attempts(e) for e in episodes]
+        predicted = np.concatenate([p for p, _ in pairs]) if pairs else np.zeros(0)
+        docked = np.concatenate([d for _, d in pairs]) if pairs else np.zeros(0)
+        if not len(predicted):
+            continue
+        which = np.clip(np.digitize(predicted, CALIBRATION_BINS) - 1, 0, len(CALIBRATION_BINS) - 2)
+        bins = [
+            {
+                "low": CALIBRATION_BINS[b],
+                "high": CALIBRATION_BINS[b + 1],
+                "attempts": int(np.sum(which == b)),
+                "predicted": float(predicted[which == b].mean()),
+                "docked": float(docked[which == b].mean()),
+            }
+            for b in range(len(CALIBRATION_BINS) - 1)
+            if np.any(which == b)
+        ]
+        out.append(
+            {
+                "prior": prior,
+                "mode": mode,
+                "strategy": strategy,
+                "attempts": len(predicted),
+                "predicted_mean": float(predicted.mean()),
+                "docked_fraction": float(docked.mean()),
+                "brier": float(np.mean((predicted - docked) ** 2)),
+                "bins": bins,
+            }
+        )
+    return out
+
+
+CALIBRATION_HEADER = (
+    f"{'prior':7} {'mode':13} {'strategy':8} {'attempts':>8} {'predicted':>9} {'docked':>6} "
+    f"{'brier':>5}  bins"
+)
+
+
+def _calibration_line(row: dict) -> str:
+    bins = " ".join(
+        f"[{b['low']:.1f},{b['high']:.1f}) {b['predicted']:.2f}/{b['docked']:.2f} ({b['attempts']})"
+        for b in row["bins"]
+    )
+    return (
+        f"{row['prior']:7} {row['mode']:13} {row['strategy']:8} {row['attempts']:>8} "
+        f"{row['predicted_mean']:>9.2f} {row['docked_fraction']:>6.2f} {row['brier']:>5.3f}  {bins}"
+    )
+
+
 def _ratios(results: list[dict]) -> None:
     """Ours' mean cycles over the better (lower) of GW and IG, per problem, prior and mode."""
     groups: dict[tuple, dict[str, dict]] = {}
@@ -357,6 +436,11 @@ def run(args) -> dict:
     print(HEADER)
     for row in results:
         print(_line(row))
+    calibration = attempt_calibration(results)
+    print("\nP_dock of the executed attempts, problems pooled (bins: predicted/docked (attempts))")
+    print(CALIBRATION_HEADER)
+    for row in calibration:
+        print(_calibration_line(row))
     return {
         "instances": instances,
         "max_cycles": max_cycles,
@@ -369,4 +453,5 @@ def run(args) -> dict:
         f"running {args.workers} episode process(es)",
         "truths": {name: [_truth_record(t) for t in entries] for name, entries in truths.items()},
         "results": results,
+        "attempt_calibration": calibration,
     }
