@@ -296,7 +296,8 @@ CALIBRATION_HEADER = (
 
 def _calibration_line(row: dict) -> str:
     bins = " ".join(
-        f"[{b['low']:.1f},{b['high']:.1f}) {b['predicted']:.2f}/{b['docked']:.2f} ({b['attempts']})"
+        f"[{b['low']:.1f},{b['high']:.1f}{']' if b['high'] >= 1.0 else ')'} "
+        f"{b['predicted']:.2f}/{b['docked']:.2f} ({b['attempts']})"
         for b in row["bins"]
     )
     return (
