@@ -256,10 +256,10 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
         groups.setdefault((row["prior"], row["mode"], row["strategy"]), []).extend(row["episodes"])
     out = []
     for (prior, mode, strategy), episodes in groups.items():
-        pairs = [_attempts(e) for e in episodes]
-        predicted = np.concatenate([p for p, _ in pairs]) if pairs else np.zeros(0)
-        docked = np.concatenate([d for _, d in pairs]) if pairs else np.zeros(0)
-        if not len(predicted):
+        pairs = [_attempts(e) for e in episodes]  # a results row has at least one episode
+        predicted = np.concatenate([p for p, _ in pairs])
+        docked = np.concatenate([d for _, d in pairs])
+        if not len(predicted):  # no episode executed an attempt
             continue
         which = np.clip(np.digitize(predicted, CALIBRATION_BINS) - 1, 0, len(CALIBRATION_BINS) - 2)
         bins = [
