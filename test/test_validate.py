@@ -3,8 +3,10 @@ in-contract data or raise MessageError, never another exception; the drop log is
 cause; every subscription of every node goes through the guard (``common.subscribe``)."""
 
 import re
+import warnings
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 from conftest import REPO_ROOT
 from geometry_msgs.msg import Point, Vector3
@@ -113,6 +115,29 @@ def test_docking_plan(data, decision):
         assert len(plan.waypoints) >= 2 and np.all(np.isfinite(plan.waypoints))
         assert abs(np.linalg.norm(plan.load) - 1.0) <= convert.UNIT_TOLERANCE
         assert plan.force_threshold > 0 and 0 < plan.max_speed < np.inf
+
+
+def test_huge_plan_vectors_are_rejected_without_overflow_warnings():
+    """Finite but huge load or waypoints overflow the norms: rejected, with no RuntimeWarning
+    (hypothesis found the overflow warning in the test above)."""
+    base = dict(decision=DockingPlan.DOCK, contact_force_threshold=5.0, max_speed=0.1)
+    line = [Point(x=0.0, y=0.0), Point(x=0.0, y=-0.1)]
+    cases = [
+        (DockingPlan(**base, waypoints=line, load_direction=Vector3(x=1e200, y=1e200)), "unit"),
+        (
+            DockingPlan(
+                **base,
+                waypoints=[Point(x=-1e308, y=0.0), Point(x=1e308, y=0.0)],
+                load_direction=Vector3(x=1.0, y=0.0),
+            ),
+            "too far apart",
+        ),
+    ]
+    for msg, message in cases:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(MessageError, match=message):
+                convert.plan_from_msg(msg)
 
 
 @EXAMPLES

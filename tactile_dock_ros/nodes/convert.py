@@ -274,6 +274,31 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
     )
 
 
+def _check_loading_move(waypoints: np.ndarray, load: np.ndarray, scalars: np.ndarray) -> None:
+    """A DOCK plan's checks (``plan_from_msg``). Finite but huge coordinates overflow the norms to
+    inf, which the checks reject: the overflow itself is not worth a RuntimeWarning."""
+    if len(waypoints) < 2:
+        raise MessageError(f"a DOCK plan needs >= 2 waypoints, got {len(waypoints)}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        move = waypoints[-1] - waypoints[-2]
+        length, load_norm = np.linalg.norm(move), np.linalg.norm(load)
+        along = move @ load
+    if not 0.0 < length < np.inf:
+        raise MessageError(
+            "the loading move (last waypoint pair) has "
+            + ("zero length" if length == 0.0 else f"length {length} (waypoints too far apart)")
+        )
+    if not abs(load_norm - 1.0) <= UNIT_TOLERANCE:
+        raise MessageError(f"load_direction must be a unit vector, got {load}")
+    if not along >= (1.0 - UNIT_TOLERANCE) * length:
+        raise MessageError(
+            f"the loading move {move.tolist()} does not point along load_direction "
+            f"{load.tolist()} (the executor pushes along the last waypoint pair)"
+        )
+    if scalars[0] <= 0 or scalars[1] <= 0:
+        raise MessageError("contact_force_threshold and max_speed must be > 0")
+
+
 def plan_from_msg(msg: DockingPlan) -> PlanCommand:
     """DockingPlan -> PlanCommand. A DOCK plan needs >= 2 distinct waypoints, a unit load along
     its last (loading) move, positive force threshold and speed; a GIVE_UP plan may have no
@@ -287,20 +312,7 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
         "thresholds", [msg.contact_force_threshold, msg.max_speed, msg.docking_probability]
     )
     if dock:
-        if len(waypoints) < 2:
-            raise MessageError(f"a DOCK plan needs >= 2 waypoints, got {len(waypoints)}")
-        if np.linalg.norm(waypoints[-1] - waypoints[-2]) <= 0.0:
-            raise MessageError("the loading move (last waypoint pair) has zero length")
-        if abs(np.linalg.norm(load) - 1.0) > UNIT_TOLERANCE:
-            raise MessageError(f"load_direction must be a unit vector, got {load}")
-        move = waypoints[-1] - waypoints[-2]
-        if move @ load < (1.0 - UNIT_TOLERANCE) * np.linalg.norm(move):
-            raise MessageError(
-                f"the loading move {move.tolist()} does not point along load_direction "
-                f"{load.tolist()} (the executor pushes along the last waypoint pair)"
-            )
-        if scalars[0] <= 0 or scalars[1] <= 0:
-            raise MessageError("contact_force_threshold and max_speed must be > 0")
+        _check_loading_move(waypoints, load, scalars)
     return PlanCommand(
         plan_id=int(msg.plan_id),
         dock=dock,
