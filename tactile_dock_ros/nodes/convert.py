@@ -58,9 +58,13 @@ OUTCOMES = {outcome.value for outcome in Outcome}  # the ExecutionReport outcome
 
 
 def _points(name: str, points, limit: int) -> np.ndarray:
-    """(k, 2) plane coordinates of a Point list of at most ``limit``; z is ignored (z = 0)."""
+    """(k, 2) plane coordinates of a Point list of at most ``limit``, each within
+    ``validate.MAX_COORDINATE_M``; z is ignored (z = 0)."""
     validate.bounded(f"{name} count", len(points), limit)
-    return finite(name, [(p.x, p.y) for p in points]).reshape(-1, 2)
+    xy = finite(name, [(p.x, p.y) for p in points]).reshape(-1, 2)
+    if np.any(np.abs(xy) > validate.MAX_COORDINATE_M):
+        raise MessageError(f"{name} has a coordinate beyond {validate.MAX_COORDINATE_M:g} m")
+    return xy
 
 
 def _point(xy) -> Point:
@@ -275,19 +279,17 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
 
 
 def _check_loading_move(waypoints: np.ndarray, load: np.ndarray, scalars: np.ndarray) -> None:
-    """A DOCK plan's checks (``plan_from_msg``). Finite but huge coordinates overflow the norms to
-    inf, which the checks reject: the overflow itself is not worth a RuntimeWarning."""
+    """A DOCK plan's checks (``plan_from_msg``; waypoints are bounded by ``_points``). A finite
+    but huge load_direction overflows its norm to inf, which the unit check rejects: the
+    overflow itself is not worth a RuntimeWarning."""
     if len(waypoints) < 2:
         raise MessageError(f"a DOCK plan needs >= 2 waypoints, got {len(waypoints)}")
+    move = waypoints[-1] - waypoints[-2]
+    length = np.linalg.norm(move)
     with np.errstate(over="ignore", invalid="ignore"):
-        move = waypoints[-1] - waypoints[-2]
-        length, load_norm = np.linalg.norm(move), np.linalg.norm(load)
-        along = move @ load
-    if not 0.0 < length < np.inf:
-        raise MessageError(
-            "the loading move (last waypoint pair) has "
-            + ("zero length" if length == 0.0 else f"length {length} (waypoints too far apart)")
-        )
+        load_norm, along = np.linalg.norm(load), move @ load
+    if length <= 0.0:
+        raise MessageError("the loading move (last waypoint pair) has zero length")
     if not abs(load_norm - 1.0) <= UNIT_TOLERANCE:
         raise MessageError(f"load_direction must be a unit vector, got {load}")
     if not along >= (1.0 - UNIT_TOLERANCE) * length:

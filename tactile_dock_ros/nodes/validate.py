@@ -22,6 +22,7 @@ MAX_SEGMENTS = 100_000  # contact segments in a history or report
 MAX_WAYPOINTS = 1_000  # DockingPlan waypoints
 MAX_CYCLES = 1_000  # EpisodeStatus cycles (the planner's max_cycles is at most 1000)
 MAX_PIXELS = 4096 * 4096  # depth image width * height
+MAX_COORDINATE_M = 1e6  # |x|, |y| of a plane point: far beyond any reach, far from overflow
 # A stamp further ahead of the receiving node's clock than this is a clock fault (seconds).
 MAX_STAMP_LEAD_S = 5.0
 
