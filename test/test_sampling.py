@@ -241,12 +241,12 @@ def test_live_pair_exit_search_matches_every_primitive():
     span = rng.uniform(0.05, np.pi / 2, len(z))
     coef = system.ellipse_coefficients(z, p)
     solve = sampling.window_can_vanish(coef, span)
-    live = system.live_pairs(coef[..., 0] + coef[..., 1] + coef[..., 3], solve)
+    live = system.live_pairs(coef[:, 0] + coef[:, 1] + coef[:, 3], solve)
     roots, _ = sampling.ellipse_roots(coef, solve & live[:, system.prim_pair], system.linear, span)
     _, mids = sampling.segment_edges(roots, np.zeros(len(z)), span)
     n_real = np.sum(np.isfinite(roots), axis=1) + 1
     hit, first = sampling._first_infeasible(system, coef, mids, n_real, live)
-    g = np.matmul(sampling.trig_basis(mids), coef.swapaxes(1, 2))
+    g = np.matmul(sampling.trig_basis(mids), coef)
     bad = np.any(system.violations(g) > 0, axis=-1)
     bad &= np.arange(mids.shape[1]) < n_real[:, None]
     assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not

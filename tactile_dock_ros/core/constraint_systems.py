@@ -64,11 +64,13 @@ class HistoryConstraints:
         self._g_mean = self._psign * quad(mean_y) + np.sum(self._plin * mean_y, -1) + self._pconst
         pair_basis = shape.basis[rows]  # (P, 4, m)
         self._lin_z = np.einsum("kj,kjm->mk", grad_mean, pair_basis[self.prim_pair]).copy()
-        self._pair_basis = np.ascontiguousarray(pair_basis.reshape(-1, self.n_dim).T)  # (m, 4P)
+        # (m, 4P) coordinate-major: each pair coordinate of ``_y`` is one contiguous plane
+        self._pair_basis = np.ascontiguousarray(pair_basis.T.reshape(self.n_dim, -1))
 
     def _y(self, z: np.ndarray) -> np.ndarray:
-        """Displacements A z of the pair coordinates, (..., P, 4)."""
-        return (z @ self._pair_basis).reshape(*z.shape[:-1], self.n_pairs, 4)
+        """Displacements A z of the pair coordinates, (..., P, 4) (a view of (..., 4, P))."""
+        y = (z @ self._pair_basis).reshape(*z.shape[:-1], 4, self.n_pairs)
+        return np.moveaxis(y, -2, -1)
 
     def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Per-primitive values (..., K): ``lin`` (modified in place) plus the per-pair
@@ -165,16 +167,21 @@ class HistoryConstraints:
         return self.structure.pair_values(self._slots(self.values(z)))
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Trig coefficients (C, K, 5) of each primitive along mu + A(z0 cos t + p sin t)."""
-        c, k = len(z0), self.n_prims
-        al, be = self._y(z0), self._y(p)
-        q_aa, q_bb, q_ab = quad(al), quad(be), bilinear(al, be)
-        out = np.zeros((c, k, 5))
-        out[..., 0] = self._g_mean
-        out[..., 1] = z0 @ self._lin_z
-        out[..., 2] = p @ self._lin_z
-        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, q_ab)):
-            self._with_quadratic(out[..., j], q)
+        """Trig coefficients (C, 5, K) of each primitive along mu + A(z0 cos t + p sin t).
+
+        Coefficient-major (k0..k4 each a contiguous (C, K) plane), so that the writes here, the
+        window filter and the window-start values stream through memory."""
+        c = len(z0)
+        both = np.concatenate([z0, p])
+        y, lin = self._y(both), both @ self._lin_z
+        al, be = y[:c], y[c:]
+        q_aa, q_bb = quad(al), quad(be)
+        out = np.empty((c, 5, self.n_prims))
+        out[:, 0] = self._g_mean
+        out[:, 1], out[:, 2] = lin[:c], lin[c:]
+        out[:, 3:] = 0.0
+        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, bilinear(al, be))):
+            self._with_quadratic(out[:, j], q)
         return out
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -224,7 +231,7 @@ class LinearConstraints:
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         zeros = np.zeros((len(z0), self.n_prims))
         h = np.broadcast_to(self.h, zeros.shape)
-        return np.stack([h, z0 @ self.F.T, p @ self.F.T, zeros, zeros], axis=-1)
+        return np.stack([h, z0 @ self.F.T, p @ self.F.T, zeros, zeros], axis=1)
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         return np.stack(

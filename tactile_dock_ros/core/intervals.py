@@ -194,13 +194,14 @@ _POWER_TO_BERNSTEIN = np.array(
 
 
 def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-    """(C, K) False where a trigonometric primitive provably keeps a strict sign on
-    [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in u = tan(t/2) on
-    [0, tan(t_max/2)] share one strict sign (the polynomial lies in their convex hull)."""
+    """(C, K) False where a trigonometric primitive (coefficients (C, 5, K)) provably keeps a
+    strict sign on [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in
+    u = tan(t/2) on [0, tan(t_max/2)] share one strict sign (the polynomial lies in their
+    convex hull)."""
     u_max = np.tan(0.5 * np.asarray(t_max, dtype=float))
     powers = u_max[:, None] ** np.arange(5)  # substitute u = u_max s, s in [0, 1]
     maps = (_POWER_TO_BERNSTEIN * powers[:, None]) @ _TRIG_TO_POLY  # (C, 5, 5)
-    bern = np.matmul(maps, np.swapaxes(coef, 1, 2))  # (C, 5, K)
+    bern = np.matmul(maps, coef)  # (C, 5, K)
     return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
@@ -229,23 +230,23 @@ def ellipse_roots(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times in (t_min, t_max[c]) where a primitive along the ellipse vanishes, sorted (C, R).
 
-    Only primitives with ``solve`` (C, K) are solved; t_max must be < pi. With u = tan(t/2) a
-    linear primitive (k3 = k4 = 0) becomes a quadratic in u; systems made only of those solve
-    quadratics. Otherwise every solved primitive is a quartic (one batch), in time shifted to
-    the middle of the longest window, phi = max(t_max) / 2: u = tan((t - phi)/2) sends the
-    point opposite the windows to infinity, so a small leading coefficient (the closed form's
-    weak case) means g is small far from every window, not at its start, where the primitive
-    just bounced on vanishes.
+    coef: trig coefficients (C, 5, K). Only primitives with ``solve`` (C, K) are solved; t_max
+    must be < pi. With u = tan(t/2) a linear primitive (k3 = k4 = 0) becomes a quadratic in
+    u; systems made only of those solve quadratics. Otherwise every solved primitive is a
+    quartic (one batch), in time shifted to the middle of the longest window,
+    phi = max(t_max) / 2: u = tan((t - phi)/2) sends the point opposite the windows to
+    infinity, so a small leading coefficient (the closed form's weak case) means g is small
+    far from every window, not at its start, where the primitive just bounced on vanishes.
     """
     t_max = np.asarray(t_max, dtype=float)
     lo = np.full(len(t_max), t_min)
     ci, ki = np.nonzero(solve)
     if np.all(linear):
-        k0, k1, k2 = coef[ci, ki, :3].T
+        k0, k1, k2 = coef[ci, :3, ki].T
         t = 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1))
     else:
         phi = 0.5 * float(t_max.max(initial=0.0))
-        poly = coef[ci, ki] @ _trig_to_quartic(phi)
+        poly = coef[ci, :, ki] @ _trig_to_quartic(phi)
         window = (np.tan(0.5 * (t_min - phi)), np.tan(0.5 * (t_max[ci] - phi)))
         t = phi + 2 * np.arctan(quartic_roots(poly, window))
     return _sorted_roots(ci, t, ki, lo, t_max)
@@ -316,9 +317,9 @@ def ellipse_feasible_set(system, z0: np.ndarray, p: np.ndarray, t_max: float) ->
     IV-E), every primitive solved (the sampler's filters skip provably irrelevant ones)."""
     coef = system.ellipse_coefficients(z0[None], p[None])
     span = np.array([t_max])
-    roots, _ = ellipse_roots(coef, np.ones(coef.shape[:2], dtype=bool), system.linear, span)
+    roots, _ = ellipse_roots(coef, np.ones((1, system.n_prims), dtype=bool), system.linear, span)
     edges, mids = segment_edges(roots, np.zeros(1), span)
-    values = system.violations(np.matmul(trig_basis(mids), coef.swapaxes(1, 2)))
+    values = system.violations(np.matmul(trig_basis(mids), coef))
     return IntervalSet.from_segments(edges[0], np.all(values[0] <= 0, axis=-1))
 
 

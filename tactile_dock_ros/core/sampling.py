@@ -156,7 +156,7 @@ def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
             return hit, first
 
         def violated(rows, span):
-            g = np.matmul(trig_basis(mids[rows, span]), coef[rows].swapaxes(1, 2))
+            g = np.matmul(trig_basis(mids[rows, span]), coef[rows])
             return np.any(system.violations(g) > 0, axis=-1)
 
     else:
@@ -167,7 +167,7 @@ def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
             hit = ~covered[:, system.contact_observations].all(axis=1)
         prims = system.pair_prims[pj]  # (R, 6)
         inactive = (prims < 0)[:, None]
-        pair_coef = coef[ci[:, None], np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
+        pair_coef = coef[ci[:, None], :, np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
         # live pairs come sorted by (row, observation): contiguous groups for the reductions
         group = ci * system.n_obs + obs
 
@@ -259,7 +259,7 @@ def hmc_chains(
         span = np.minimum(lc, win[idx])
         coef = system.ellipse_coefficients(zc, pc)
         solve = window_can_vanish(coef, span)
-        g0 = coef[..., 0] + coef[..., 1] + coef[..., 3]
+        g0 = coef[:, 0] + coef[:, 1] + coef[:, 3]
         live = system.live_pairs(g0, solve)
         solve &= live[:, system.prim_pair]
         roots, owner = ellipse_roots(coef, solve, system.linear, span)
