@@ -207,6 +207,26 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
         sample_posterior(shape, history, 5, np.random.default_rng(0), init_z=before.z * np.nan)
 
 
+def test_warm_start_prunes_free_pairs_no_posterior_draw_comes_near():
+    """With enough warm rows the chains drop the free pairs that the rows' widened moment fit
+    rules out: contact pairs all stay, a fresh posterior run never touches a dropped pair, and
+    the warm-started draws still satisfy the whole history."""
+    problem, history, _ = three_ledges_after_probes(10)
+    shape = problem.prior
+    before = sample_posterior(shape, history, 100, np.random.default_rng(1)).z
+    fresh = sample_posterior(shape, history, 400, np.random.default_rng(2)).z
+    pairs = prune_pairs(shape, history, 1e-4)
+    kept = sampling._posterior_pruned(shape, history, pairs, before, 1e-4)
+    is_kept = (pairs[:, None] == kept[None]).all(-1).any(1)
+    assert len(kept) == is_kept.sum() < len(pairs)
+    assert is_kept[history.is_contact[pairs[:, 0]]].all()
+    dropped = pairs[~is_kept]
+    assert not np.any(HistoryConstraints(shape, history, dropped).pair_violations(fresh) > 0)
+    warm = sample_posterior(shape, history, 100, np.random.default_rng(3), init_z=before)
+    assert warm.info["pairs"] == len(kept) and warm.info["warm_seeds"] == 16
+    assert history_consistent(False, warm.vertices, history, problem.friction).all()
+
+
 def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
     """Look-ahead windows (fixed or adapted to the bounce rate) only reorganise Alg. 1: one
     move from the same states and momenta ends at the same state after the same bounces, and
