@@ -64,12 +64,18 @@ class HistoryConstraints:
         self._g_mean = self._psign * quad(mean_y) + np.sum(self._plin * mean_y, -1) + self._pconst
         pair_basis = shape.basis[rows]  # (P, 4, m)
         self._lin_z = np.einsum("kj,kjm->mk", grad_mean, pair_basis[self.prim_pair]).copy()
-        # (m, 4P) coordinate-major: each pair coordinate of ``_y`` is one contiguous plane
-        self._pair_basis = np.ascontiguousarray(pair_basis.T.reshape(self.n_dim, -1))
+        # the quadratic term depends on the pair's edge only: computed once per paired edge
+        # (tens of edges against hundreds of pairs), then gathered to the pairs
+        edges, self._pair_edge = np.unique(pairs[:, 1], return_inverse=True)
+        self._n_edges = len(edges)
+        edge_basis = shape.basis[shape.edge_rows()[edges]]  # (E, 4, m)
+        # (m, 4E) coordinate-major: each edge coordinate of ``_y`` is one contiguous plane
+        self._edge_basis = np.ascontiguousarray(edge_basis.T.reshape(self.n_dim, -1))
 
     def _y(self, z: np.ndarray) -> np.ndarray:
-        """Displacements A z of the pair coordinates, (..., P, 4) (a view of (..., 4, P))."""
-        y = (z @ self._pair_basis).reshape(*z.shape[:-1], 4, self.n_pairs)
+        """Displacements A z of the paired edges' end coordinates, (..., E, 4) (a view of
+        (..., 4, E)); ``[..., self._pair_edge]`` of a per-edge value gives the pairs'."""
+        y = (z @ self._edge_basis).reshape(*z.shape[:-1], 4, self._n_edges)
         return np.moveaxis(y, -2, -1)
 
     def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -82,7 +88,8 @@ class HistoryConstraints:
 
     def values(self, z: np.ndarray) -> np.ndarray:
         """Primitive values (..., K) at states z (..., m)."""
-        return self._with_quadratic(z @ self._lin_z + self._g_mean, quad(self._y(z)))
+        q = quad(self._y(z))[..., self._pair_edge]
+        return self._with_quadratic(z @ self._lin_z + self._g_mean, q)
 
     def primitive_index(self, pair: np.ndarray, slot: int) -> np.ndarray:
         """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
@@ -113,9 +120,9 @@ class HistoryConstraints:
         return self.reduce_pairs(self.pair_values_of(g))
 
     def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Values (R, S) of pairs ``pair`` (R,) from their slot values g (R, S, 6), inactive
-        slots -inf (see ``PairStructure.pair_values``)."""
-        g1, g2, g3, g4, g5, g6 = np.moveaxis(g, -1, 0)
+        """Values (R, S) of pairs ``pair`` (R,) from their slot values g (R, 6, S), inactive
+        slots -inf or below every active value (see ``PairStructure.pair_values``)."""
+        g1, g2, g3, g4, g5, g6 = g.swapaxes(0, 1)
         gmax = np.maximum(np.maximum(g1, g2), np.maximum(g3, g4))
         gmin = np.minimum(np.minimum(g1, g2), np.minimum(g3, g4))
         free_val = np.maximum(-gmax, gmin)
@@ -172,16 +179,18 @@ class HistoryConstraints:
         Coefficient-major (k0..k4 each a contiguous (C, K) plane), so that the writes here, the
         window filter and the window-start values stream through memory."""
         c = len(z0)
-        both = np.concatenate([z0, p])
-        y, lin = self._y(both), both @ self._lin_z
+        y = self._y(np.concatenate([z0, p]))
         al, be = y[:c], y[c:]
         q_aa, q_bb = quad(al), quad(be)
+        q_edge = np.stack([0.5 * (q_aa + q_bb), 0.5 * (q_aa - q_bb), bilinear(al, be)], axis=1)
+        q = q_edge[..., self._pair_edge]  # (C, 3, P): the k0, k3, k4 terms
         out = np.empty((c, 5, self.n_prims))
         out[:, 0] = self._g_mean
-        out[:, 1], out[:, 2] = lin[:c], lin[c:]
+        np.matmul(z0, self._lin_z, out=out[:, 1])
+        np.matmul(p, self._lin_z, out=out[:, 2])
         out[:, 3:] = 0.0
-        for j, q in ((0, 0.5 * (q_aa + q_bb)), (3, 0.5 * (q_aa - q_bb)), (4, bilinear(al, be))):
-            self._with_quadratic(out[:, j], q)
+        for i, j in enumerate((0, 3, 4)):
+            self._with_quadratic(out[:, j], q[:, i])
         return out
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -189,8 +198,9 @@ class HistoryConstraints:
         y0, v = self._y(z0), self._y(d)
         out = np.zeros((len(z0), self.n_prims, 3))
         out[..., 0] = self.values(z0)
-        out[..., 1] = self._with_quadratic(d @ self._lin_z, 2 * bilinear(y0, v))
-        self._with_quadratic(out[..., 2], quad(v))
+        pe = self._pair_edge
+        out[..., 1] = self._with_quadratic(d @ self._lin_z, 2 * bilinear(y0, v)[..., pe])
+        self._with_quadratic(out[..., 2], quad(v)[..., pe])
         return out
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
@@ -226,7 +236,7 @@ class LinearConstraints:
         return g
 
     def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
-        return g[..., 0]
+        return g[:, 0]
 
     def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
         zeros = np.zeros((len(z0), self.n_prims))

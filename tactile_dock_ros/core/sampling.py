@@ -82,6 +82,9 @@ WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then cli
 HMC_TARGET_BOUNCES = 100  # burn-in shortens HMC moves to about this many bounces (limit 500)
 HMC_MIN_DURATION = 0.02  # rad: shortest adapted HMC move
 POSTERIOR_PRUNE_WIDEN = 2.0  # std factor of the warm rows' moment fit that prunes free pairs
+# trig coefficients of an inactive pair slot: a value far below any primitive's, so the pair's
+# max/min structure ignores it as it would -inf, without inf arithmetic in the products
+INACTIVE_SLOT = np.array([-1e300, 0.0, 0.0, 0.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,14 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     return edges, values, mean, std
 
 
+def _starts(key: np.ndarray) -> np.ndarray:
+    """Mask of the first element of each run of equal values in ``key`` (1-D)."""
+    out = np.empty(len(key), dtype=bool)
+    out[:1] = True
+    np.not_equal(key[1:], key[:-1], out=out[1:])
+    return out
+
+
 def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
     """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
     such segment. Row c has ``n_real[c]`` segments; the rest are the zero-width padding at the
@@ -167,24 +178,25 @@ def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
             covered[ci, obs] = True
             hit = ~covered[:, system.contact_observations].all(axis=1)
         prims = system.pair_prims[pj]  # (R, 6)
-        inactive = (prims < 0)[:, None]
-        pair_coef = coef[ci[:, None], :, np.maximum(prims, 0)].swapaxes(1, 2)  # (R, 5, 6)
-        # live pairs come sorted by (row, observation): contiguous groups for the reductions
-        group = ci * system.n_obs + obs
+        pair_coef = coef[ci[:, None], :, np.maximum(prims, 0)]  # (R, 6, 5)
+        pair_coef[prims < 0] = INACTIVE_SLOT  # constant far below every value
+        # live pairs come sorted by (row, observation): contiguous groups for the reductions;
+        # a chunk keeps whole rows, so a group or row starts where it did among all live pairs
+        group_start, row_start = _starts(ci * system.n_obs + obs), _starts(ci)
 
         def violated(rows, span):
             sel = np.flatnonzero(todo[ci])
-            g = np.matmul(trig_basis(mids[ci[sel], span]), pair_coef[sel])  # (R', s, 6)
-            g = np.where(inactive[sel], -np.inf, g)
+            basis = trig_basis(mids[rows, span]).swapaxes(1, 2)  # (rows, 5, s)
+            at_row = np.cumsum(todo)[ci[sel]] - 1  # each pair's position in rows
+            g = np.matmul(pair_coef[sel], basis[at_row])  # (R', 6, s)
             q = system.pair_values_at(pj[sel], g)
             q = np.where(free[sel, None], -q, q)  # free: max over pairs, contact: min
-            starts = np.flatnonzero(np.diff(group[sel], prepend=-1))
+            starts = np.flatnonzero(group_start[sel])
             m = np.minimum.reduceat(q, starts, axis=0)
             bad = np.where(free[sel][starts, None], -m, m) > 0  # (groups, s)
-            at_row = np.cumsum(todo)[ci[sel][starts]] - 1  # the group's position in rows
-            row_starts = np.flatnonzero(np.diff(at_row, prepend=-1))
+            row_starts = np.flatnonzero(row_start[sel][starts])
             out = np.zeros((rows.size, bad.shape[1]), dtype=bool)
-            out[at_row[row_starts]] = np.logical_or.reduceat(bad, row_starts, axis=0)
+            out[at_row[starts[row_starts]]] = np.logical_or.reduceat(bad, row_starts, axis=0)
             return out
 
     for lo in range(0, n_seg, chunk):  # bounded by S / chunk
@@ -410,13 +422,12 @@ def _picked_violated(system, coef, mids, pick) -> np.ndarray:
         return out
     prims = system.pair_prims[pj]  # (R, slots)
     coef = coef[ci[:, None], np.maximum(prims, 0)]  # (R, slots, 3)
-    t = mids[ci]  # (R, S)
-    g = coef[..., 0][:, None] + t[..., None] * (
-        coef[..., 1][:, None] + t[..., None] * coef[..., 2][:, None]
-    )
-    q = system.pair_values_at(pj, np.where((prims < 0)[:, None], -np.inf, g))  # (R, S)
+    coef[prims < 0] = (INACTIVE_SLOT[0], 0.0, 0.0)
+    t = mids[ci][:, None]  # (R, 1, S)
+    g = coef[..., 0, None] + t * (coef[..., 1, None] + t * coef[..., 2, None])  # (R, slots, S)
+    q = system.pair_values_at(pj, g)  # (R, S)
     free = system.pair_free[pj]
-    starts = np.flatnonzero(np.diff(ci, prepend=-1))  # pairs come sorted by row
+    starts = np.flatnonzero(_starts(ci))  # pairs come sorted by row
     worst = np.maximum.reduceat(q, starts, axis=0)  # free: any pair crossed
     best = np.minimum.reduceat(q, starts, axis=0)  # contact: no pair satisfied
     out[ci[starts]] = np.where(free[starts, None], worst, best) > 0
