@@ -156,3 +156,26 @@ def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path):
     report = json.loads(out.read_text())
     assert 0 < report["unfinished_episodes"] < 3 * 2 * 3
     assert sum(len(r["episodes"]) for r in report["results"]) == 18 - report["unfinished_episodes"]
+
+
+def test_pool_workers_die_on_sigterm_and_leave_sigint_to_the_parent(monkeypatch):
+    import signal
+    from types import SimpleNamespace
+
+    from tactile_dock_ros.tools.bench import docking as bench_docking
+
+    def handlers(task):  # runs in the forked workers
+        return {
+            "outcome": "probe",
+            "cycles": 0,
+            "term": signal.getsignal(signal.SIGTERM) == signal.SIG_DFL,
+            "int": signal.getsignal(signal.SIGINT) == signal.SIG_IGN,
+        }
+
+    monkeypatch.setattr(bench_docking, "_episode", handlers)
+    task = SimpleNamespace(
+        problem="sloper", prior_source="problem", mode="compliant", strategy="ours",
+        instance=0, feasible=True,
+    )  # fmt: skip
+    records = bench_docking._run_all([task] * 4, workers=2)
+    assert all(r["term"] and r["int"] for r in records)

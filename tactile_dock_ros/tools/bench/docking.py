@@ -373,7 +373,7 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
             for k, task in enumerate(tasks):
                 done(k, _episode(task))
         else:
-            with multiprocessing.get_context("fork").Pool(workers) as pool:
+            with multiprocessing.get_context("fork").Pool(workers, _worker_signals) as pool:
                 for k, record in pool.imap_unordered(_indexed, enumerate(tasks)):
                     done(k, record)
     except KeyboardInterrupt:
@@ -382,6 +382,15 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
     return out
+
+
+def _worker_signals() -> None:
+    """Pool workers ignore SIGINT (the parent stops the run) and die on SIGTERM. Inheriting the
+    parent's handlers (SIGTERM raising KeyboardInterrupt) made ``Pool.terminate`` at the end of
+    a run race with a worker waiting for its next task: measured, a worker that never exited
+    and a parent waiting on it forever."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
