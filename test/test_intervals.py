@@ -8,7 +8,7 @@ from scipy import stats
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
-from tactile_dock_ros.core.constraints import prune_pairs
+from tactile_dock_ros.core.constraints import observation_primitives, pair_values, prune_pairs
 from tactile_dock_ros.core.intervals import (
     ellipse_feasible_set,
     ellipse_roots,
@@ -102,6 +102,31 @@ def test_ellipse_interval_sets_agree_with_dense_evaluation():
         g = trig_basis(ts[::400]) @ coef
         assert np.allclose(g, system.values(path[::400]), atol=1e-12)
     assert exits > 0
+
+
+def test_primitive_values_match_the_direct_pair_evaluation():
+    """The system's per-edge quadratic terms, gathered to the pairs, give every pair's g1..g6
+    as evaluated directly on its own edge coordinates; so do its line coefficients."""
+    shape, system, feasible_z, rng = shape_system()
+    pairs = system.structure.pairs
+    assert len(np.unique(pairs[:, 1])) < len(pairs) / 2  # most edges serve several pairs
+    z = np.vstack([feasible_z, rng.normal(size=(10, shape.n_basis))])
+    d = rng.normal(size=z.shape)
+
+    def direct(z):
+        sign, lin, const, active = observation_primitives(system.history, shape.friction)
+        y = shape.states(z)[:, shape.edge_rows()[pairs[:, 1]]]  # (N, P, 4)
+        obs = pairs[:, 0]
+        return system.structure.pair_values(
+            pair_values(y, sign[obs], lin[obs], const[obs], active[obs])
+        )
+
+    assert np.allclose(system.pair_violations(z), direct(z), atol=1e-12)
+    coef = system.line_coefficients(z, d)  # (N, K, 3): q0 + q1 t + q2 t^2
+    g = coef[..., 0] + 0.7 * coef[..., 1] + 0.49 * coef[..., 2]
+    assert np.allclose(
+        system.structure.pair_values(system._slots(g)), direct(z + 0.7 * d), atol=1e-12
+    )
 
 
 def test_window_filter_never_drops_a_root():
