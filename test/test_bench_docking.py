@@ -22,6 +22,9 @@ def test_docking_bench_small(tmp_path):
         assert 0 < row["cycle_seconds_median"] <= row["cycle_seconds_max"]
         later = [t for e in row["episodes"] for t in e["cycle_seconds"][1:]]
         assert (row["later_cycle_seconds_median"] is None) == (not later)
+        for e in row["episodes"]:  # one check per cycle; the first draws from the prior
+            assert len(e["chains_disagree"]) == len(e["cycle_seconds"])
+            assert e["chains_disagree"][0] is None
     ours, gw = report["results"]
     assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
     calibration = {row["strategy"]: row for row in report["attempt_calibration"]}
@@ -33,6 +36,33 @@ def test_docking_bench_small(tmp_path):
         )
         assert sum(b["attempts"] for b in cal["bins"]) == cal["attempts"]
         assert 0.0 <= cal["brier"] <= 1.0
+
+
+def test_a_cycle_with_a_history_reports_its_chains_check(tmp_path):
+    out = tmp_path / "checked.json"
+    argv = ["docking", "--instances", "1", "--max-cycles", "2", "--problems", "three_ledges"]
+    argv += ["--prior", "problem", "--mode", "compliant", "--strategies", "ours"]
+    assert bench.main([*argv, "--json", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["results"]
+    (episode,) = row["episodes"]
+    assert episode["cycles"] == 2  # truth 0 docks in its second cycle
+    first, second = episode["chains_disagree"]
+    assert first is None and second in (True, False)  # HMC chains checked in the second
+    assert row["chains_disagree_fraction"] == float(second)
+
+
+def test_chains_disagree_counts_only_the_cycles_the_sampler_checked():
+    from tactile_dock_ros.core.convergence import Convergence
+
+    assert docking._disagree(Convergence(rhat=1.5, rhat_limit=1.3)) is True
+    assert docking._disagree(Convergence(rhat=1.1, rhat_limit=1.3)) is False
+    assert docking._disagree(Convergence(trapped=2)) is True  # trapped, R-hat not measurable
+    assert docking._disagree(Convergence()) is None  # independent draws: nothing checked
+    episode = {"feasible": True, "cycles": 4, "docked": True, "outcome": "docked"}
+    episode |= {"cycle_seconds": [0.1] * 4, "chains_disagree": [None, True, False, True]}
+    assert docking._summary([episode])["chains_disagree_fraction"] == pytest.approx(2 / 3)
+    episode["chains_disagree"] = [None] * 4
+    assert docking._summary([episode])["chains_disagree_fraction"] is None
 
 
 def test_attempt_calibration_scores_only_executed_attempts():

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import geometry2d, planner, sampling, simulate, slides
+from .convergence import Convergence
 from .episode import EpisodeState, PlannerConfig
 from .history import History, Status
 from .shape import GaussianShape
@@ -42,6 +43,7 @@ class CycleLog:
     dropped: int  # observations the sampler ignored as inconsistent
     rejected: int  # posterior samples on which a recorded slide could not have happened
     history_length: int  # observations available when this cycle planned
+    convergence: Convergence  # the sampler's between-chain check of this cycle's samples
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,7 @@ def run_episode(
                 dropped=len(post.dropped),
                 rejected=decision.rejected,
                 history_length=len(state.history),
+                convergence=post.convergence,
             )
             if decision.decision == "give_up":
                 log.append(

@@ -15,7 +15,10 @@ Reported per problem, prior, mode and strategy: feasible count, success on feasi
 cycles on feasible truths (mean, std, max), how infeasible truths end (the planner's give-up,
 its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's, and
 the wall time of one cycle (inference + planning): median over all cycles, over the cycles
-after each episode's first (with a history), and the maximum.
+after each episode's first (with a history), and the maximum; and ``disagree``, the fraction of
+the cycles whose sampler could check its chains (MCMC with enough draws) where they disagreed
+(split R-hat over its limit or a trapped chain: ``sampling`` warns then; per cycle in each
+episode's ``chains_disagree``, None where nothing was checked).
 
 Also reported, per prior, mode and strategy (problems pooled): how well the planner's predicted
 P_dock of each executed attempt matched what happened (``attempt_calibration``): the attempts,
@@ -146,6 +149,7 @@ def _episode(task: _Task) -> dict:
             "message": "no prior",
             "p_dock": [],
             "cycle_seconds": [],
+            "chains_disagree": [],
         }
     result = explore.run_episode(
         _problem(task.problem),
@@ -166,7 +170,16 @@ def _episode(task: _Task) -> dict:
         "message": result.message,
         "p_dock": [c.plan.p_dock for c in result.cycles_log],
         "cycle_seconds": [c.inference_seconds + c.planning_seconds for c in result.cycles_log],
+        # per cycle: the sampler's between-chain check failed (split R-hat over its limit or a
+        # trapped chain); None where it could not check (independent draws, short chains)
+        "chains_disagree": [_disagree(c.convergence) for c in result.cycles_log],
     }
+
+
+def _disagree(report) -> bool | None:
+    if report.trapped == 0 and not np.isfinite(report.rhat):
+        return None
+    return not report.converged
 
 
 def _truths(args, name: str, instances: int, config: PerceptionConfig | None) -> list[dict]:
@@ -211,6 +224,7 @@ def _summary(episodes: list[dict]) -> dict:
     cycle_times = [t for e in episodes for t in e["cycle_seconds"]]
     later_times = [t for e in episodes for t in e["cycle_seconds"][1:]]  # with a history
     give_up_cycles = [e["cycles"] for e in infeasible if e["outcome"] == "gave_up"]
+    checked = [d for e in episodes for d in e.get("chains_disagree", []) if d is not None]
     return {
         "instances": len(episodes),
         "feasible": len(feasible),
@@ -230,6 +244,7 @@ def _summary(episodes: list[dict]) -> dict:
         "cycle_seconds_median": float(np.median(cycle_times)) if cycle_times else None,
         "later_cycle_seconds_median": float(np.median(later_times)) if later_times else None,
         "cycle_seconds_max": float(np.max(cycle_times)) if cycle_times else None,
+        "chains_disagree_fraction": float(np.mean(checked)) if checked else None,
     }
 
 
@@ -325,7 +340,7 @@ def _fmt(value, spec: str) -> str:
 HEADER = (
     f"{'problem':13} {'prior':7} {'mode':13} {'strategy':8} {'feas':>5} {'succ':>5} "
     f"{'cyc mean':>8} {'std':>5} {'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'cap':>3} "
-    f"{'err':>3} {'/best':>5} {'s/cycle':>7} {'later':>6} {'max s':>6}"
+    f"{'err':>3} {'/best':>5} {'s/cycle':>7} {'later':>6} {'max s':>6} {'disagree':>8}"
 )
 
 
@@ -341,7 +356,8 @@ def _line(row: dict) -> str:
         f"{_fmt(row.get('ours_over_best_baseline'), '.2f'):>5} "
         f"{_fmt(row['cycle_seconds_median'], '.3f'):>7} "
         f"{_fmt(row['later_cycle_seconds_median'], '.3f'):>6} "
-        f"{_fmt(row['cycle_seconds_max'], '.2f'):>6}"
+        f"{_fmt(row['cycle_seconds_max'], '.2f'):>6} "
+        f"{_fmt(row['chains_disagree_fraction'], '.0%'):>8}"
     )
 
 
