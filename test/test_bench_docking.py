@@ -161,7 +161,8 @@ def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
     assert {t.instance for t in calls[:4]} == {0}
 
 
-def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path):
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path, workers):
     import os
     import signal
     import subprocess
@@ -169,6 +170,7 @@ def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path):
 
     out = tmp_path / "term.json"
     argv = ["docking", "--quick", "--problems", "sloper", "--prior", "depth", "--json", str(out)]
+    argv += ["--workers", workers]
     process = subprocess.Popen(
         [sys.executable, "-m", "tactile_dock_ros.tools.bench", *argv],
         stderr=subprocess.PIPE,
