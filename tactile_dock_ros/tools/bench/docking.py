@@ -224,7 +224,7 @@ def _summary(episodes: list[dict]) -> dict:
     cycle_times = [t for e in episodes for t in e["cycle_seconds"]]
     later_times = [t for e in episodes for t in e["cycle_seconds"][1:]]  # with a history
     give_up_cycles = [e["cycles"] for e in infeasible if e["outcome"] == "gave_up"]
-    checked = [d for e in episodes for d in e.get("chains_disagree", []) if d is not None]
+    checked = [d for e in episodes for d in e["chains_disagree"] if d is not None]
     return {
         "instances": len(episodes),
         "feasible": len(feasible),
