@@ -275,23 +275,42 @@ def test_live_pair_exit_search_matches_every_primitive():
 
 
 @pytest.mark.parametrize("target", [sampling.HMC_TARGET_BOUNCES, 2])
-def test_hmc_burn_in_sets_the_move_duration_from_the_bounce_rate(sloper_case, monkeypatch, target):
-    """Each burn-in move measures bounces per rad; the kept moves (every ``thin``-th) use
-    T = HMC_TARGET_BOUNCES / rate, at most ``hmc_duration``. Sloper needs a few bounces per
-    move: T stays pi/2; asking for 2 bounces per move shortens it."""
+def test_hmc_burn_in_sets_each_chains_move_duration_from_its_bounce_rate(
+    sloper_case, monkeypatch, target
+):
+    """Each chain's burn-in move measures its own bounces per rad; its kept moves (every
+    ``thin``-th) use T = HMC_TARGET_BOUNCES / rate, at most ``hmc_duration``, and continue with
+    the next momenta. Sloper needs a few bounces per move: T stays pi/2; asking for 2 bounces
+    per move shortens it."""
     monkeypatch.setattr(sampling, "HMC_TARGET_BOUNCES", target)
     problem, history = sloper_case
     z = sample_posterior(problem.prior, history, 16, np.random.default_rng(2)).z[:4]
     system = HistoryConstraints(problem.prior, history, prune_pairs(problem.prior, history, 1e-4))
+    for c in range(len(z)):  # one chain: the call's counters are that chain's
+        _, stats = sampling.hmc_chains(system, z[c : c + 1], 0, np.random.default_rng(c), burn_in=1)
+        rate = stats["bounces"] / stats["travel"]
+        assert stats["bounces"] > 0
+        assert stats["duration"][0] == pytest.approx(min(target / rate, np.pi / 2))
     runner = ChainRunner(system, "hmc", np.random.default_rng(5))
     kept = runner.run(z, 3, thin=2, burn_in=1)
+    assert runner.duration.shape == (len(z),)
+    assert np.all(runner.duration < np.pi / 2) == (target == 2)
     rng = np.random.default_rng(5)
-    burn, stats = sampling.hmc_chains(system, z, 1, rng)
-    rate = stats["bounces"] / stats["travel"]
-    assert stats["bounces"] > 0 and (target / rate < np.pi / 2) == (target == 2)
-    assert runner.duration == pytest.approx(min(target / rate, np.pi / 2))
+    burn, _ = sampling.hmc_chains(system, z, 1, rng)
     every, _ = sampling.hmc_chains(system, burn[:, -1], 6, rng, runner.duration)
-    np.testing.assert_array_equal(kept, every[:, [1, 3, 5]])
+    np.testing.assert_allclose(kept, every[:, [1, 3, 5]], rtol=1e-9, atol=1e-9)
+    # a call without burn-in continues the same chains with their durations
+    runner.rng = np.random.default_rng(9)
+    more = runner.run(kept[:, -1], 2)
+    again, _ = sampling.hmc_chains(
+        system, kept[:, -1], 2, np.random.default_rng(9), runner.duration
+    )
+    np.testing.assert_array_equal(more, again)
+    # without burn-in nothing adapts: any chains run at hmc_duration (restarted subsets too)
+    plain = ChainRunner(system, "hmc", np.random.default_rng(3))
+    assert plain.run(z, 1).shape == (4, 1, z.shape[1])
+    assert plain.run(z[:2], 1).shape == (2, 1, z.shape[1])
+    assert plain.duration == np.pi / 2
 
 
 @pytest.mark.parametrize("n", [1, 100, 255, 257, 1000, 1025, 4096, 5000, 20000])

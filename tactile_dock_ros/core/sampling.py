@@ -216,17 +216,24 @@ def hmc_chains(
     z: np.ndarray,
     n_steps: int,
     rng: np.random.Generator,
-    duration: float = np.pi / 2,
+    duration: float | np.ndarray = np.pi / 2,
     max_bounces: int = 500,
     window: float | None = None,
+    burn_in: int = 0,
 ) -> tuple[np.ndarray, dict]:
-    """``n_steps`` HMC-with-bouncing moves (Alg. 1) of each chain z (C, m): (C, n_steps, m).
+    """``burn_in`` discarded then ``n_steps`` kept HMC-with-bouncing moves (Alg. 1) of each
+    chain z (C, m): the kept states (C, n_steps, m).
 
-    Each move draws p ~ N(0, I) and follows z(t) = z0 cos t + p sin t for t in [0, duration];
+    Each move draws p ~ N(0, I) and follows z(t) = z0 cos t + p sin t for t in [0, T];
     at the end of the feasible interval containing the current time the momentum is reflected
-    about the gradient of the primitive whose root ends it. Implementation decisions:
+    about the gradient of the primitive whose root ends it. T is ``duration``, a scalar or one
+    per chain (C,). Implementation decisions:
     - the chains run asynchronously in one batch: a chain that finishes a move starts its next
-      one in the same iteration, so no chain waits for the one with the most bounces;
+      one in the same iteration, so no chain waits for the one with the most bounces (burn-in
+      moves included);
+    - after each burn-in move a chain sets its own T for what follows from that move's bounce
+      rate, ``HMC_TARGET_BOUNCES`` / (bounces per rad), within [HMC_MIN_DURATION, its
+      ``duration``] (see ``ChainRunner``); the kept moves are plain HMC with that fixed T;
     - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
       a window without an exit just advances the state: an exact reorganisation of Alg. 1's
@@ -243,29 +250,34 @@ def hmc_chains(
     - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
       loop schedules windows and bounces.
     Returns the draws and counters (bounces, rejected moves, travel: rad followed by all
-    chains, rejected moves included).
+    chains, rejected moves included; ``duration``: each chain's T of its kept moves, (C,)).
     """
-    if not 0 < duration < np.pi:
-        raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
     z = np.array(z, dtype=float)
     c, m = z.shape
+    longest = np.broadcast_to(np.asarray(duration, dtype=float), (c,))
+    if not np.all((longest > 0) & (longest < np.pi)):
+        raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
+    moves = burn_in + n_steps
     out = np.empty((c, n_steps, m))
-    done = np.zeros(c, dtype=int)
+    done = np.zeros(c, dtype=int)  # moves finished, burn-in included
     start = z.copy()
-    momenta = rng.standard_normal((max(n_steps, 1), c, m))  # move k of chain c: [k, c]
+    momenta = rng.standard_normal((max(moves, 1), c, m))  # move k of chain c: [k, c]
     p = momenta[0].copy()
-    left = np.full(c, float(duration))
+    dur = longest.copy()
+    left = dur.copy()
     bounced = np.zeros(c, dtype=int)
+    moved = np.zeros(c)  # rad travelled in the current move
     stats = {"bounces": 0, "rejected": 0, "travel": 0.0}
+    move_max = float(np.max(duration))  # the longest move: the look-ahead bound
     if window is None:
-        window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else duration
+        window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else move_max
     win = np.full(c, float(window))
     # only quartic solves are worth culling; all-linear systems keep the fixed window
     w_min = window if np.all(system.linear) else min(WINDOW_MIN, window)
     doublings = int(np.ceil(np.log2(window / w_min))) + 1
-    per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(duration / window)) + 1
-    for _ in range(per_move * n_steps):  # every iteration advances each active chain
-        idx = np.flatnonzero(done < n_steps)
+    per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(move_max / window)) + 1
+    for _ in range(per_move * moves):  # every iteration advances each active chain
+        idx = np.flatnonzero(done < moves)
         if idx.size == 0:
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
@@ -283,6 +295,7 @@ def hmc_chains(
         rows = np.arange(len(idx))
         dt = np.where(hit, edges[rows, first], span)
         stats["travel"] += float(dt.sum())
+        moved[idx] += dt
         cos, sin = np.cos(dt)[:, None], np.sin(dt)[:, None]
         z_new, p_new = zc * cos + pc * sin, pc * cos - zc * sin
         bounce = hit & ~stuck
@@ -305,15 +318,21 @@ def hmc_chains(
             rejected = idx[failed]
             z[rejected] = start[rejected]
             stats["rejected"] += int(rejected.size)
-            out[fin, done[fin]] = z[fin]
+            kept = fin[done[fin] >= burn_in]
+            out[kept, done[kept] - burn_in] = z[kept]
+            warm = fin[done[fin] < burn_in]
+            rate = bounced[warm] / np.maximum(moved[warm], 1e-12)
+            wanted = HMC_TARGET_BOUNCES / np.maximum(rate, 1e-12)
+            dur[warm] = np.clip(wanted, np.minimum(HMC_MIN_DURATION, longest[warm]), longest[warm])
             done[fin] += 1
             start[fin] = z[fin]
-            p[fin] = momenta[np.minimum(done[fin], n_steps - 1), fin]
-            left[fin] = duration
+            p[fin] = momenta[np.minimum(done[fin], moves - 1), fin]
+            left[fin] = dur[fin]
             bounced[fin] = 0
-    unfinished = np.flatnonzero(done < n_steps)
-    for ci in unfinished:  # only if the iteration bound was hit: repeat the last state
-        out[ci, done[ci] :] = start[ci]
+            moved[fin] = 0.0
+    for ci in np.flatnonzero(done < moves):  # only if the iteration bound was hit
+        out[ci, max(done[ci] - burn_in, 0) :] = start[ci]  # repeat the last state
+    stats["duration"] = dur
     return out, stats
 
 
@@ -377,11 +396,7 @@ class ChainRunner:
         ``burn_in`` discarded moves (MH adapts its step and HMC its duration during those
         only): (C, steps, m)."""
         if self.method == "hmc":
-            for _ in range(burn_in):  # one move at a time: at most one at the full duration
-                draws, stats = self._hmc(z, 1)
-                z = draws[:, -1]
-                self._adapt_duration(stats)
-            return self._hmc(z, steps * thin)[0][:, thin - 1 :: thin]
+            return self._hmc(z, steps * thin, burn_in)[:, thin - 1 :: thin]
         for _ in range(burn_in):
             z = self.step(z, adapt=True)
         out = np.empty((len(z), steps, z.shape[1]))
@@ -391,26 +406,28 @@ class ChainRunner:
             out[:, i] = z
         return out
 
-    def _hmc(self, z: np.ndarray, moves: int) -> tuple[np.ndarray, dict]:
-        draws, stats = hmc_chains(self.system, z, moves, self.rng, self.duration)
-        self.stats["bounces"] += stats["bounces"]
-        self.stats["accepted"] += len(z) * moves - stats["rejected"]
-        self.stats["proposed"] += len(z) * moves
-        return draws, stats
+    def _hmc(self, z: np.ndarray, moves: int, burn_in: int) -> np.ndarray:
+        """HMC moves; with ``burn_in`` each chain adapts its move duration T first.
 
-    def _adapt_duration(self, stats: dict) -> None:
-        """After each burn-in move: the HMC move duration for what follows, from that move's
-        bounce rate (``stats`` of ``hmc_chains``). Decision (the paper fixes T): in a thin
-        posterior (many contacts on a sharp depth prior) a T = pi/2 move needs thousands of
-        bounces, so nearly every move hits ``max_bounces`` and is rejected; chains then stay
-        at their seeds (notch, depth prior: 136 of 160 moves rejected, 20 s per cycle, split
-        R-hat 3.7). The duration becomes
-        HMC_TARGET_BOUNCES / (bounces per rad), within [HMC_MIN_DURATION, hmc_duration]. It is
-        fixed before any kept move, so the kept moves are plain HMC with that T."""
-        rate = stats["bounces"] / max(stats["travel"], 1e-12)
-        shortest = min(HMC_MIN_DURATION, self.hmc_duration)
-        wanted = HMC_TARGET_BOUNCES / max(rate, 1e-12)
-        self.duration = float(np.clip(wanted, shortest, self.hmc_duration))
+        Decision (the paper fixes T = ``hmc_duration``): in a thin posterior (many contacts on
+        a sharp depth prior) a T = pi/2 move needs thousands of bounces, so nearly every move
+        hits ``max_bounces`` and is rejected; chains then stay at their seeds (notch, depth
+        prior: 136 of 160 moves rejected, 20 s per cycle, split R-hat 3.7). After each burn-in
+        move a chain sets T = HMC_TARGET_BOUNCES / (bounces per rad of that move), within
+        [HMC_MIN_DURATION, hmc_duration] (``hmc_chains``): fixed before any kept move, so the
+        kept moves are plain HMC with that T, one per chain (any fixed T leaves the posterior
+        invariant). Per chain, not pooled over the chains: pooling made every burn-in move a
+        barrier at which all chains waited for the one with the most bounces. A call without
+        burn-in continues the chains of the last call with burn-in, with their T (all at
+        ``hmc_duration`` if there was none)."""
+        duration = self.hmc_duration if burn_in else self.duration
+        draws, stats = hmc_chains(self.system, z, moves, self.rng, duration, burn_in=burn_in)
+        if burn_in:
+            self.duration = stats["duration"]
+        self.stats["bounces"] += stats["bounces"]
+        self.stats["accepted"] += len(z) * (burn_in + moves) - stats["rejected"]
+        self.stats["proposed"] += len(z) * (burn_in + moves)
+        return draws
 
 
 def _picked_violated(system, coef, mids, pick) -> np.ndarray:
@@ -1024,8 +1041,10 @@ def sample_posterior(
     )
     if method == "mh":
         info["mh_scale"] = float(runner.scale)
-    if method == "hmc":
-        info["hmc_duration"] = runner.duration
+    if method == "hmc":  # the kept moves' T: median and range over the chains
+        durations = np.asarray(runner.duration, dtype=float)
+        info["hmc_duration"] = float(np.median(durations))
+        info["hmc_duration_range"] = (float(durations.min()), float(durations.max()))
     return PosteriorSamples(
         z, vertices, method, ess, time.perf_counter() - start, dropped, info, convergence
     )
