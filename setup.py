@@ -23,7 +23,7 @@ setup(
         "tactile_dock_ros.tools",
         "tactile_dock_ros.tools.bench",
     ],
-    install_requires=["numpy>=1.26", "scipy>=1.11", "shapely>=2.0", "pyyaml>=6.0"],
+    install_requires=["numpy>=1.26", "numba>=0.59", "scipy>=1.11", "shapely>=2.0", "pyyaml>=6.0"],
     extras_require={
         "perception": ["opencv-contrib-python-headless>=4.9"],
         "plot": ["matplotlib>=3.8"],

@@ -44,9 +44,15 @@ ROSDEP_KEYS = {
     "launch_testing": "launch_testing",
 }
 # Imported, but rosdistro has no rosdep key for it: installed from requirements-pip.txt and not
-# declared. tmg_hmc is only the baseline of `bench sampling` (which has --skip-tmg); mcap and
-# mcap_ros2 only read bags back in test_replay.py (others' MCAP reader).
-PIP_ONLY = {"tmg_hmc": "tmg-hmc", "mcap": "mcap", "mcap_ros2": "mcap-ros2-support"}
+# declared. numba's key (python3-numba) resolves on Debian and Ubuntu bionic / focal only, not on
+# noble (Jazzy, Kilted); tmg_hmc is only the baseline of `bench sampling` (which has
+# --skip-tmg); mcap and mcap_ros2 only read bags back in test_replay.py (others' MCAP reader).
+PIP_ONLY = {
+    "numba": "numba",
+    "tmg_hmc": "tmg-hmc",
+    "mcap": "mcap",
+    "mcap_ros2": "mcap-ros2-support",
+}
 # Declared dependencies used by something other than a Python import: (kind, files, pattern).
 OTHER_USES = {
     "ament_cmake": ("buildtool_depends", "CMakeLists.txt", r"find_package\(ament_cmake "),

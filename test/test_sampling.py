@@ -246,34 +246,6 @@ def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
         np.testing.assert_allclose(end, whole, atol=1e-8)
 
 
-def test_live_pair_exit_search_matches_every_primitive():
-    """The exit search that evaluates only live pairs (and contact observations without live
-    pairs) finds the same first infeasible segment as judging every primitive."""
-    problem = problems.get("notch")
-    truth = problem.sample_ground_truth(np.random.default_rng(3))
-    history = probe_history(problem, truth, np.linspace(-0.25, 0.25, 6))
-    shape = problem.prior
-    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
-    assert system.n_prims > sampling.WINDOW_MIN_PRIMITIVES  # the live-pair path
-    rng = np.random.default_rng(4)
-    z = sample_posterior(shape, history, 48, rng).z
-    p = rng.standard_normal(z.shape)
-    span = rng.uniform(0.05, np.pi / 2, len(z))
-    coef = system.ellipse_coefficients(z, p)
-    solve = sampling.window_can_vanish(coef, span)
-    live = system.live_pairs(coef[:, 0] + coef[:, 1] + coef[:, 3], solve)
-    roots, _ = sampling.ellipse_roots(coef, solve & live[:, system.prim_pair], system.linear, span)
-    _, mids = sampling.segment_edges(roots, np.zeros(len(z)), span)
-    n_real = np.sum(np.isfinite(roots), axis=1) + 1
-    hit, first = sampling._first_infeasible(system, coef, mids, n_real, live)
-    g = np.matmul(sampling.trig_basis(mids), coef)
-    bad = np.any(system.violations(g) > 0, axis=-1)
-    bad &= np.arange(mids.shape[1]) < n_real[:, None]
-    assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
-    np.testing.assert_array_equal(hit, bad.any(axis=1))
-    np.testing.assert_array_equal(first[hit], np.argmax(bad[hit], axis=1))
-
-
 @pytest.mark.parametrize("target", [sampling.HMC_TARGET_BOUNCES, 2])
 def test_hmc_burn_in_sets_each_chains_move_duration_from_its_bounce_rate(
     sloper_case, monkeypatch, target

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import hmc_exit
 from .constraints import PairStructure, bilinear, observation_primitives, quad
 from .history import History
 from .shape import GaussianShape
@@ -53,6 +54,10 @@ class HistoryConstraints:
         self.pair_observation = pairs[:, 0]  # (P,) sorted
         self.pair_free = self.structure.free_pair  # (P,) pairs of free observations
         self.contact_observations = np.flatnonzero(~self.structure.free_obs)
+        # for the compiled window-exit search (``hmc_exit.first_exits``)
+        self.exit_structure = hmc_exit.structure(
+            self.pair_prims, self.pair_observation, self.pair_free, ~self.structure.free_obs, False
+        )
         # flat per-primitive coefficients (K,), (K, 4), (K,)
         self._psign = self._sign[self.prim_pair, self.prim_slot]
         self._plin = self._lin[self.prim_pair, self.prim_slot]
@@ -228,6 +233,9 @@ class LinearConstraints:
         self.pair_observation = self.prim_pair  # each violated iff its value is > 0, as a
         self.pair_free = np.ones(self.n_prims, dtype=bool)  # free observation's pair
         self.contact_observations = np.zeros(0, dtype=int)
+        self.exit_structure = hmc_exit.structure(  # plain: violated where the value is > 0
+            self.pair_prims, self.pair_observation, self.pair_free, np.zeros(self.n_obs), True
+        )
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return z @ self.F.T + self.h

@@ -21,6 +21,7 @@ from scipy.special import log_ndtr, ndtri_exp
 # spurious root only splits a segment in two, which the midpoint test makes harmless.
 _IMAG_TOL = 1e-6
 _MINUS_PLUS = np.array([-1.0, 1.0])
+ROOT_MIN_TIME = 1e-9  # rad: roots of an ellipse this close to its start are the bounce just made
 
 
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -205,7 +206,7 @@ def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
     return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
-def _trig_to_quartic(phi: float) -> np.ndarray:
+def trig_to_quartic(phi: float) -> np.ndarray:
     """(5, 5) map from trig coefficients (k0..k4) of g(t) to the quartic (highest degree first)
     (1 + u^2)^2 g(phi + 2 atan u) in u = tan((t - phi)/2)."""
     c1, s1, c2, s2 = np.cos(phi), np.sin(phi), np.cos(2 * phi), np.sin(2 * phi)
@@ -226,7 +227,7 @@ def ellipse_roots(
     solve: np.ndarray,
     linear: np.ndarray,
     t_max: np.ndarray,
-    t_min: float = 1e-9,
+    t_min: float = ROOT_MIN_TIME,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Times in (t_min, t_max[c]) where a primitive along the ellipse vanishes, sorted (C, R).
 
@@ -246,7 +247,7 @@ def ellipse_roots(
         t = 2 * np.arctan(quadratic_roots(k0 - k1, 2 * k2, k0 + k1))
     else:
         phi = 0.5 * float(t_max.max(initial=0.0))
-        poly = coef[ci, :, ki] @ _trig_to_quartic(phi)
+        poly = coef[ci, :, ki] @ trig_to_quartic(phi)
         window = (np.tan(0.5 * (t_min - phi)), np.tan(0.5 * (t_max[ci] - phi)))
         t = phi + 2 * np.arctan(quartic_roots(poly, window))
     return _sorted_roots(ci, t, ki, lo, t_max)

@@ -21,14 +21,14 @@ from .constraints import collision_bounds, observation_violations, prune_pairs
 from .convergence import Convergence, rhat_limit, split_rhat, trapped_chains
 from .ess import effective_sample_size
 from .history import History
+from .hmc_exit import first_exits
 from .intervals import (
-    ellipse_roots,
     line_roots,
     line_scan,
     normal_log_mass,
     sample_truncated_normal,
     segment_edges,
-    trig_basis,
+    trig_to_quartic,
     window_can_vanish,
 )
 from .shape import GaussianShape
@@ -146,71 +146,6 @@ def _starts(key: np.ndarray) -> np.ndarray:
     return out
 
 
-def _first_infeasible(system, coef, mids, n_real, live, chunk: int = 16):
-    """Per row: whether any segment midpoint (C, S) on the ellipse is infeasible, and the first
-    such segment. Row c has ``n_real[c]`` segments; the rest are the zero-width padding at the
-    window end (judged by the last real one) and are never evaluated.
-
-    Only the ``live`` (C, P) pairs (``live_pairs``) are evaluated: any other pair has, through
-    the window, a primitive of fixed sign against the crossing pattern, so a non-live free pair
-    stays uncrossed and a non-live contact pair stays unsatisfied. Hence a free observation is
-    violated iff one of its live pairs is crossed, a contact observation iff all its live pairs
-    are unsatisfied, and a contact observation without live pairs is violated from the start
-    (first segment). Small systems (<= WINDOW_MIN_PRIMITIVES primitives) evaluate every
-    primitive instead: fewer numpy calls. Chunked: the first exit is usually among the first
-    few roots, and a row leaves once its real segments are judged."""
-    c, n_seg = mids.shape
-    hit = np.zeros(c, dtype=bool)
-    first = np.zeros(c, dtype=int)
-    ci, pj = np.nonzero(live)
-    if system.n_prims <= WINDOW_MIN_PRIMITIVES:
-        if ci.size == 0:
-            return hit, first
-
-        def violated(rows, span):
-            g = np.matmul(trig_basis(mids[rows, span]), coef[rows])
-            return np.any(system.violations(g) > 0, axis=-1)
-
-    else:
-        obs, free = system.pair_observation[pj], system.pair_free[pj]
-        if system.contact_observations.size:
-            covered = np.zeros((c, system.n_obs), dtype=bool)
-            covered[ci, obs] = True
-            hit = ~covered[:, system.contact_observations].all(axis=1)
-        prims = system.pair_prims[pj]  # (R, 6)
-        pair_coef = coef[ci[:, None], :, np.maximum(prims, 0)]  # (R, 6, 5)
-        pair_coef[prims < 0] = INACTIVE_SLOT  # constant far below every value
-        # live pairs come sorted by (row, observation): contiguous groups for the reductions;
-        # a chunk keeps whole rows, so a group or row starts where it did among all live pairs
-        group_start, row_start = _starts(ci * system.n_obs + obs), _starts(ci)
-
-        def violated(rows, span):
-            sel = np.flatnonzero(todo[ci])
-            basis = trig_basis(mids[rows, span]).swapaxes(1, 2)  # (rows, 5, s)
-            at_row = np.cumsum(todo)[ci[sel]] - 1  # each pair's position in rows
-            g = np.matmul(pair_coef[sel], basis[at_row])  # (R', 6, s)
-            q = system.pair_values_at(pj[sel], g)
-            q = np.where(free[sel, None], -q, q)  # free: max over pairs, contact: min
-            starts = np.flatnonzero(group_start[sel])
-            m = np.minimum.reduceat(q, starts, axis=0)
-            bad = np.where(free[sel][starts, None], -m, m) > 0  # (groups, s)
-            row_starts = np.flatnonzero(row_start[sel][starts])
-            out = np.zeros((rows.size, bad.shape[1]), dtype=bool)
-            out[at_row[starts[row_starts]]] = np.logical_or.reduceat(bad, row_starts, axis=0)
-            return out
-
-    for lo in range(0, n_seg, chunk):  # bounded by S / chunk
-        todo = ~hit & (n_real > lo)
-        rows = np.flatnonzero(todo)
-        if rows.size == 0:
-            break
-        bad = violated(rows, slice(lo, lo + chunk))
-        found = bad.any(axis=1)
-        hit[rows[found]] = True
-        first[rows[found]] = lo + np.argmax(bad[found], axis=1)
-    return hit, first
-
-
 def hmc_chains(
     system,
     z: np.ndarray,
@@ -273,7 +208,8 @@ def hmc_chains(
         window = 0.15 if system.n_prims > WINDOW_MIN_PRIMITIVES else move_max
     win = np.full(c, float(window))
     # only quartic solves are worth culling; all-linear systems keep the fixed window
-    w_min = window if np.all(system.linear) else min(WINDOW_MIN, window)
+    all_linear = bool(np.all(system.linear))
+    w_min = window if all_linear else min(WINDOW_MIN, window)
     doublings = int(np.ceil(np.log2(window / w_min))) + 1
     per_move = (max_bounces + 2) * (doublings + 1) + int(np.ceil(move_max / window)) + 1
     for _ in range(per_move * moves):  # every iteration advances each active chain
@@ -287,20 +223,17 @@ def hmc_chains(
         g0 = coef[:, 0] + coef[:, 1] + coef[:, 3]
         live = system.live_pairs(g0, solve)
         solve &= live[:, system.prim_pair]
-        roots, owner = ellipse_roots(coef, solve, system.linear, span)
-        edges, mids = segment_edges(roots, np.zeros(len(idx)), span)
-        n_real = np.sum(np.isfinite(roots), axis=1) + 1
-        hit, first = _first_infeasible(system, coef, mids, n_real, live)
-        stuck = hit & (first == 0)
-        rows = np.arange(len(idx))
-        dt = np.where(hit, edges[rows, first], span)
+        phi = 0.5 * float(span.max())  # quartics in time shifted as in ``ellipse_roots``
+        hit, dt, owner, stuck = first_exits(
+            coef, solve, live, span, phi, trig_to_quartic(phi), all_linear, system.exit_structure
+        )
         stats["travel"] += float(dt.sum())
         moved[idx] += dt
         cos, sin = np.cos(dt)[:, None], np.sin(dt)[:, None]
         z_new, p_new = zc * cos + pc * sin, pc * cos - zc * sin
         bounce = hit & ~stuck
         if bounce.any():
-            prim = owner[rows[bounce], first[bounce] - 1]
+            prim = owner[bounce]
             grad = system.gradient(z_new[bounce], prim)
             norm = np.sqrt((grad * grad).sum(axis=1, keepdims=True))
             unit = grad / np.where(norm > 0, norm, 1.0)

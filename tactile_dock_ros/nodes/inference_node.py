@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import time
 from collections import deque
 from functools import partial
 
@@ -34,6 +35,7 @@ from rclpy.node import Node
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
+from tactile_dock_ros.core import hmc_exit
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
@@ -67,6 +69,11 @@ class InferenceNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("inference", **kwargs)
         self.p = declare(self, PARAMS)
+        started = time.perf_counter()
+        hmc_exit.warm_up()  # compiles on the first start after an install (~10 s), then cached
+        self.get_logger().info(
+            f"HMC exit search ready in {time.perf_counter() - started:.1f} s (compiled or cached)"
+        )
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
         # the history with each row's plan, and the previous posterior (the warm start)

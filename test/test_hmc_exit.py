@@ -1,0 +1,96 @@
+"""The compiled window-exit search of the HMC loop against the numpy interval algebra."""
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.core import hmc_exit, intervals, problems
+from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
+from tactile_dock_ros.core.constraints import prune_pairs
+from tactile_dock_ros.core.sampling import sample_posterior
+from tactile_dock_ros.core.sampling_problems import probe_history
+
+
+def _history_system(name: str, seed: int, probes) -> tuple[HistoryConstraints, np.ndarray]:
+    problem = problems.get(name)
+    truth = problem.sample_ground_truth(np.random.default_rng(seed))
+    history = probe_history(problem, truth, probes)
+    shape = problem.prior
+    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
+    return system, sample_posterior(shape, history, 48, np.random.default_rng(4)).z
+
+
+def _linear_system() -> tuple[LinearConstraints, np.ndarray]:
+    """Random half-spaces around the origin (the feasible start)."""
+    rng = np.random.default_rng(7)
+    F = rng.standard_normal((80, 6))
+    return LinearConstraints(F, -rng.uniform(0.2, 1.5, 80)), np.zeros((48, 6))
+
+
+CASES = {
+    "notch, live-pair judging": lambda: _history_system("notch", 3, np.linspace(-0.25, 0.25, 6)),
+    "sloper, small system": lambda: _history_system("sloper", 3, [0.0]),
+    "linear inequalities": _linear_system,
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
+    """Per chain: the compiled search (live pairs, segments in time order, first infeasible
+    one) gives the same exit as solving the same primitives with ``intervals.ellipse_roots``
+    and judging every segment midpoint on every primitive: whether, when, on which root,
+    and whether the first segment is already infeasible."""
+    system, z = CASES[case]()
+    rng = np.random.default_rng(5)
+    p = rng.standard_normal(z.shape)
+    span = rng.uniform(0.05, np.pi / 2, len(z))
+    coef = system.ellipse_coefficients(z, p)
+    solve = intervals.window_can_vanish(coef, span)
+    live = system.live_pairs(coef[:, 0] + coef[:, 1] + coef[:, 3], solve)
+    solve &= live[:, system.prim_pair]
+    roots, owner = intervals.ellipse_roots(coef, solve, system.linear, span)
+    edges, mids = intervals.segment_edges(roots, np.zeros(len(z)), span)
+    n_real = np.sum(np.isfinite(roots), axis=1) + 1
+    bad = np.any(system.violations(np.matmul(intervals.trig_basis(mids), coef)) > 0, axis=-1)
+    bad &= np.arange(mids.shape[1]) < n_real[:, None]
+    hit, first = bad.any(axis=1), np.argmax(bad, axis=1)
+    rows = np.arange(len(z))
+
+    phi = 0.5 * float(span.max())
+    all_linear = bool(np.all(system.linear))
+    got = hmc_exit.first_exits(
+        coef, solve, live, span, phi, intervals.trig_to_quartic(phi), all_linear,
+        system.exit_structure,
+    )  # fmt: skip
+    got_hit, got_dt, got_owner, got_stuck = got
+    assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
+    np.testing.assert_array_equal(got_hit, hit)
+    np.testing.assert_allclose(got_dt, np.where(hit, edges[rows, first], span), atol=1e-12)
+    np.testing.assert_array_equal(got_stuck, hit & (first == 0))
+    leave = hit & (first > 0)
+    np.testing.assert_array_equal(got_owner[~leave], -1)
+    # the bounce: reflection about the owner's gradient, whose sign does not matter (ties of
+    # a primitive and its negative, e.g. a pair's g3 = -g4, may be taken in either order)
+    t = got_dt[leave, None]
+    z_exit = z[leave] * np.cos(t) + p[leave] * np.sin(t)
+    unit = [system.gradient(z_exit, k) for k in (got_owner[leave], owner[leave, first[leave] - 1])]
+    unit = [g / np.linalg.norm(g, axis=1, keepdims=True) for g in unit]
+    np.testing.assert_allclose(np.abs(np.sum(unit[0] * unit[1], axis=1)), 1.0, atol=1e-9)
+
+
+def test_quartic_roots_match_the_vectorized_solver():
+    """Random quartics, some with near-double roots and tiny leading coefficients (the
+    companion-matrix fallback), solved one by one: the same real roots as
+    ``intervals.quartic_roots``."""
+    rng = np.random.default_rng(11)
+    polys = rng.standard_normal((400, 5))
+    polys[:50, 0] *= 1e-5  # leading coefficient below the closed form's limit
+    double = rng.standard_normal((50, 2))  # (u - a)^2 (u - b)(u + b)-like: near-double roots
+    polys[50:100] = [np.poly([a, a + 1e-9, b, -b]) for a, b in double]
+    lo, hi = -0.7, 0.9
+    expected = np.sort(intervals.quartic_roots(polys, (lo, hi)), axis=1)
+    got = np.empty((len(polys), 4))
+    for i, poly in enumerate(polys):
+        hmc_exit.quartic_roots(poly, lo, hi, got[i])
+    got = np.sort(got, axis=1)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
+    np.testing.assert_allclose(got, expected, rtol=1e-7, atol=1e-7)
