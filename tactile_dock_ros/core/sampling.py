@@ -172,7 +172,10 @@ def hmc_chains(
     - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
       a window without an exit just advances the state: an exact reorganisation of Alg. 1's
-      loop in which far fewer primitives can vanish per solve);
+      loop in which far fewer primitives can vanish per solve); numpy filters the primitives
+      that may vanish (Bernstein bound) and the pairs that can change the crossing pattern
+      (``live_pairs``), and ``hmc_exit.first_exits`` (compiled) solves their roots and finds
+      each chain's first infeasible segment;
     - on systems with quadratic primitives each chain adapts its window to its bounce rate:
       after a bounce at dt into the window the next one is WINDOW_GROWTH dt (at least
       WINDOW_MIN), after a window without an exit twice as long (at most ``window``). Any
@@ -181,7 +184,8 @@ def hmc_chains(
       none to cull: there the extra iterations only cost);
     - a move that needs more than ``max_bounces`` bounces, or whose first segment is judged
       infeasible (numerical grazing), is rejected: the chain keeps its state for that move;
-    - roots closer than 1e-9 to the current time are ignored (the one just bounced on);
+    - roots closer than ROOT_MIN_TIME (1e-9) to the window start are ignored (the one just
+      bounced on);
     - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
       loop schedules windows and bounces.
     Returns the draws and counters (bounces, rejected moves, travel: rad followed by all
