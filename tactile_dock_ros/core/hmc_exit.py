@@ -24,10 +24,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .intervals import ROOT_MIN_TIME, trig_to_quartic
+from .intervals import IMAG_TOL, ROOT_MIN_TIME, trig_to_quartic
 
-IMAG_TOL = 1e-6  # as intervals._IMAG_TOL: complex pairs this close to real count as real
-INACTIVE = -1e300  # value of an inactive slot: below every active value
+# value of an inactive pair slot: far below any primitive's, so the pair's max / min structure
+# ignores it as it would -inf, without inf arithmetic in products
+INACTIVE = -1e300
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -19,7 +19,7 @@ from scipy.special import log_ndtr, ndtri_exp
 
 # Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
 # spurious root only splits a segment in two, which the midpoint test makes harmless.
-_IMAG_TOL = 1e-6
+IMAG_TOL = 1e-6
 _MINUS_PLUS = np.array([-1.0, 1.0])
 ROOT_MIN_TIME = 1e-9  # rad: roots of an ellipse this close to its start are the bounce just made
 
@@ -51,7 +51,7 @@ def _companion_roots(coef: np.ndarray) -> np.ndarray:
     comp[:, 0, :] = -coef[:, 1:] / lead
     comp[:, 1, 0] = comp[:, 2, 1] = comp[:, 3, 2] = 1.0
     eig = np.linalg.eigvals(comp)
-    real = np.abs(eig.imag) <= _IMAG_TOL * (1.0 + np.abs(eig.real))
+    real = np.abs(eig.imag) <= IMAG_TOL * (1.0 + np.abs(eig.real))
     return np.where(real, eig.real, np.nan)
 
 
@@ -61,7 +61,7 @@ def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     caller). The depressed quartic y^4 + p y^2 + q y + r splits into the two quadratics
     y^2 -+ s y + p/2 + m +- q / (2 s), s = sqrt(2 m), with m > 0 the largest root of the
     resolvent cubic m^3 + p m^2 + (p^2/4 - r) m - q^2/8 (Cardano / Viete, Newton-polished).
-    Complex pairs whose imaginary part is below _IMAG_TOL (1 + |real part|) count as a double
+    Complex pairs whose imaginary part is below IMAG_TOL (1 + |real part|) count as a double
     real root (as in ``_companion_roots``); every root gets one Newton step on the quartic."""
     a, b, c, d = (coef[:, 1:] / coef[:, :1]).T
     a2 = a * a
@@ -89,7 +89,7 @@ def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lin = s[:, None] * _MINUS_PLUS  # (n, 2) monic quadratics y^2 + lin y + const
     const = (0.5 * p + m)[:, None] - (0.5 * q / s)[:, None] * _MINUS_PLUS
     disc2 = lin * lin - 4 * const
-    real = disc2 >= -4 * _IMAG_TOL**2 * ((1 + 0.5 * s) ** 2)[:, None]
+    real = disc2 >= -4 * IMAG_TOL**2 * ((1 + 0.5 * s) ** 2)[:, None]
     half = -0.5 * (lin + np.copysign(np.sqrt(np.maximum(disc2, 0.0)), lin))  # |half| >= s/2
     x = np.empty((len(coef), 4))
     x[:, :2], x[:, 2:] = half, const / half

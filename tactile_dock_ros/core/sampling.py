@@ -21,7 +21,7 @@ from .constraints import collision_bounds, observation_violations, prune_pairs
 from .convergence import Convergence, rhat_limit, split_rhat, trapped_chains
 from .ess import effective_sample_size
 from .history import History
-from .hmc_exit import first_exits
+from .hmc_exit import INACTIVE, first_exits
 from .intervals import (
     line_roots,
     line_scan,
@@ -82,9 +82,6 @@ WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then cli
 HMC_TARGET_BOUNCES = 100  # burn-in shortens HMC moves to about this many bounces (limit 500)
 HMC_MIN_DURATION = 0.02  # rad: shortest adapted HMC move
 POSTERIOR_PRUNE_WIDEN = 2.0  # std factor of the warm rows' moment fit that prunes free pairs
-# trig coefficients of an inactive pair slot: a value far below any primitive's, so the pair's
-# max/min structure ignores it as it would -inf, without inf arithmetic in the products
-INACTIVE_SLOT = np.array([-1e300, 0.0, 0.0, 0.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -376,7 +373,7 @@ def _picked_violated(system, coef, mids, pick) -> np.ndarray:
         return out
     prims = system.pair_prims[pj]  # (R, slots)
     coef = coef[ci[:, None], np.maximum(prims, 0)]  # (R, slots, 3)
-    coef[prims < 0] = (INACTIVE_SLOT[0], 0.0, 0.0)
+    coef[prims < 0] = (INACTIVE, 0.0, 0.0)
     t = mids[ci][:, None]  # (R, 1, S)
     g = coef[..., 0, None] + t * (coef[..., 1, None] + t * coef[..., 2, None])  # (R, slots, S)
     q = system.pair_values_at(pj, g)  # (R, S)
