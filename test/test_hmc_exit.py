@@ -16,11 +16,14 @@ def _history_system(name: str, seed: int, probes) -> tuple[HistoryConstraints, n
     history = probe_history(problem, truth, probes)
     shape = problem.prior
     system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
-    return system, sample_posterior(shape, history, 48, np.random.default_rng(4)).z
+    posterior = sample_posterior(shape, history, 48, np.random.default_rng(4)).z
+    # plus prior draws: starts that violate observations (the search must say so at once)
+    return system, np.vstack([posterior, shape.sample_z(np.random.default_rng(6), 16)])
 
 
 def _linear_system() -> tuple[LinearConstraints, np.ndarray]:
-    """Random half-spaces around the origin (the feasible start)."""
+    """Random half-spaces around the origin (the feasible start; for these the live set is
+    the primitives that may vanish, exact only from a feasible start, as in the HMC loop)."""
     rng = np.random.default_rng(7)
     F = rng.standard_normal((80, 6))
     return LinearConstraints(F, -rng.uniform(0.2, 1.5, 80)), np.zeros((48, 6))
@@ -63,6 +66,8 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     )  # fmt: skip
     got_hit, got_dt, got_owner, got_stuck = got
     assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
+    if isinstance(system, HistoryConstraints):  # infeasible starts and blocked contacts
+        assert np.any(got_stuck), "no infeasible start in the batch"
     np.testing.assert_array_equal(got_hit, hit)
     np.testing.assert_allclose(got_dt, np.where(hit, edges[rows, first], span), atol=1e-12)
     np.testing.assert_array_equal(got_stuck, hit & (first == 0))
