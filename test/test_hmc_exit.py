@@ -80,22 +80,3 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     unit = [system.gradient(z_exit, k) for k in (got_owner[leave], owner[leave, first[leave] - 1])]
     unit = [g / np.linalg.norm(g, axis=1, keepdims=True) for g in unit]
     np.testing.assert_allclose(np.abs(np.sum(unit[0] * unit[1], axis=1)), 1.0, atol=1e-9)
-
-
-def test_quartic_roots_match_the_vectorized_solver():
-    """Random quartics, some with near-double roots and tiny leading coefficients (the
-    companion-matrix fallback), solved one by one: the same real roots as
-    ``intervals.quartic_roots``."""
-    rng = np.random.default_rng(11)
-    polys = rng.standard_normal((400, 5))
-    polys[:50, 0] *= 1e-5  # leading coefficient below the closed form's limit
-    double = rng.standard_normal((50, 2))  # (u - a)^2 (u - b)(u + b)-like: near-double roots
-    polys[50:100] = [np.poly([a, a + 1e-9, b, -b]) for a, b in double]
-    lo, hi = -0.7, 0.9
-    expected = np.sort(intervals.quartic_roots(polys, (lo, hi)), axis=1)
-    got = np.empty((len(polys), 4))
-    for i, poly in enumerate(polys):
-        hmc_exit.quartic_roots(poly, lo, hi, got[i])
-    got = np.sort(got, axis=1)
-    np.testing.assert_array_equal(np.isnan(got), np.isnan(expected))
-    np.testing.assert_allclose(got, expected, rtol=1e-7, atol=1e-7)

@@ -8,9 +8,10 @@ segments judged in chunks) spent ~55 % of a three_ledges cycle in a few dozen ar
 iteration for ~10 roots and a handful of segments per chain. Here each chain is one compiled
 loop that solves its roots, walks its segments in time order and stops at the first
 infeasible one. Decision (not in the paper): numba, compiled on first use and cached next to
-this file; the same arithmetic as ``intervals.quartic_roots`` (Ferrari closed form, Newton
-polish, companion-matrix eigenvalues where the closed form is unreliable or misses a sign
-change across the window), so the draws match the numpy search up to rounding.
+this file; the roots come from the same solvers as the batched interval algebra's
+(``roots.quartic``: Ferrari closed form, Newton polish, companion-matrix eigenvalues where the
+closed form is unreliable or misses a sign change across the window), so the draws match the
+numpy search up to rounding.
 
 Segment judging (the ``live`` pairs of ``HistoryConstraints.live_pairs``): a free
 observation is violated where any of its live pairs is crossed (pair value > 0), a contact
@@ -24,126 +25,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .intervals import IMAG_TOL, ROOT_MIN_TIME, trig_to_quartic
+from .intervals import ROOT_MIN_TIME, trig_to_quartic
+from .roots import quadratic, quadratic_batch, quartic, quartic_batch
 
 # value of an inactive pair slot: far below any primitive's, so the pair's max / min structure
 # ignores it as it would -inf, without inf arithmetic in products
 INACTIVE = -1e300
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _horner(c, u):
-    return (((c[0] * u + c[1]) * u + c[2]) * u + c[3]) * u + c[4]
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _ferrari(c, x):
-    """Roots of the quartic c (5,) (scaled, leading coefficient not tiny) into x (4,) (NaN for
-    complex pairs); False where the closed form cannot split it (``intervals._ferrari_roots``)."""
-    a, b, cc, d = c[1] / c[0], c[2] / c[0], c[3] / c[0], c[4] / c[0]
-    a2 = a * a
-    p = b - 0.375 * a2
-    q = cc - 0.5 * a * b + 0.125 * a2 * a
-    r = d - 0.25 * a * cc + (b / 16 - 3 * a2 / 256) * a2
-    big_p = -p * p / 12 - r
-    big_q = (r / 3 - p * p / 108) * p - q * q / 8
-    disc = 0.25 * big_q * big_q + big_p**3 / 27
-    if disc < 0:  # three real roots of the resolvent: Viete's largest
-        root3 = np.sqrt(max(-big_p / 3, 1e-100))
-        m = 2 * root3 * np.cos(np.arccos(min(max(-0.5 * big_q / root3**3, -1.0), 1.0)) / 3)
-    else:
-        w = np.cbrt(-0.5 * big_q - np.copysign(np.sqrt(max(disc, 0.0)), big_q))
-        if w == 0:
-            w = 1e-300
-        m = w - big_p / (3 * w)
-    m -= p / 3
-    c1 = 0.25 * p * p - r
-    df = (3 * m + 2 * p) * m + c1
-    step = ((((m + p) * m + c1) * m - 0.125 * q * q) / df) if df != 0 else 0.0
-    if abs(step) <= 1e-6 * (1 + abs(m)):
-        m -= step
-    s = np.sqrt(max(2 * m, 0.0))
-    split = s > 1e-7 * (1 + np.sqrt(abs(p)))
-    if not split:
-        s = 1.0
-    for i in range(2):
-        sign = -1.0 if i == 0 else 1.0
-        lin = s * sign
-        const = (0.5 * p + m) - (0.5 * q / s) * sign
-        disc2 = lin * lin - 4 * const
-        if disc2 >= -4 * IMAG_TOL**2 * (1 + 0.5 * s) ** 2:
-            half = -0.5 * (lin + np.copysign(np.sqrt(max(disc2, 0.0)), lin))
-            x[i], x[2 + i] = half - 0.25 * a, const / half - 0.25 * a
-        else:
-            x[i] = x[2 + i] = np.nan
-    for i in range(4):
-        f = (((c[0] * x[i] + c[1]) * x[i] + c[2]) * x[i] + c[3]) * x[i]
-        slope = ((4 * c[0] * x[i] + 3 * c[1]) * x[i] + 2 * c[2]) * x[i] + c[3]
-        if abs(slope) > 1e-12:
-            x[i] -= (f + c[4]) / slope
-    return split
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _companion(c, x):
-    """Real roots of the quartic c (5,) into x (4,) by companion-matrix eigenvalues."""
-    lead = c[0]
-    if abs(lead) < 1e-13:
-        lead = -1e-13 if lead < 0 else 1e-13
-    comp = np.zeros((4, 4))
-    for j in range(4):
-        comp[0, j] = -c[j + 1] / lead
-    comp[1, 0] = comp[2, 1] = comp[3, 2] = 1.0
-    eig = np.linalg.eigvals(comp.astype(np.complex128))
-    for i in range(4):
-        real = abs(eig[i].imag) <= IMAG_TOL * (1.0 + abs(eig[i].real))
-        x[i] = eig[i].real if real else np.nan
-
-
-@numba.njit(cache=True, error_model="numpy")
-def quartic_roots(poly, lo, hi, x):
-    """Real roots of poly (5,) (highest degree first) into x (4,), NaN where absent, as
-    ``intervals.quartic_roots`` with the window (lo, hi)."""
-    scale = 0.0
-    for j in range(5):
-        scale = max(scale, abs(poly[j]))
-    if scale == 0:
-        x[:] = np.nan
-        return
-    c = poly / scale
-    bad = True
-    if abs(c[0]) >= 1e-3:
-        bad = not _ferrari(c, x)
-    inside = 0
-    for i in range(4):
-        if np.isinf(x[i]):
-            bad = True
-        if x[i] > lo and x[i] < hi:
-            inside += 1
-    if (inside % 2 == 1) != (_horner(c, lo) * _horner(c, hi) < 0):
-        bad = True
-    if bad:
-        _companion(c, x)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def quadratic_roots(a, b, c, x):
-    """Real roots of a x^2 + b x + c into x (2,), NaN where absent (``intervals``' form)."""
-    scale = max(abs(a), abs(b), abs(c))
-    if scale <= 0:
-        scale = 1.0
-    a, b, c = a / scale, b / scale, c / scale
-    disc = b * b - 4 * a * c
-    x[0] = x[1] = np.nan
-    if a != 0:
-        if disc >= 0:
-            q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
-            x[0], x[1] = q / a, c / q
-    elif b != 0:
-        x[0] = -c / b
-    for i in range(2):
-        if not np.isfinite(x[i]):
-            x[i] = np.nan
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -158,7 +45,7 @@ def _window_roots(coef, solve, span, to_quartic, phi, all_linear, times, owners)
         if not solve[k]:
             continue
         if all_linear:
-            quadratic_roots(coef[0, k] - coef[1, k], 2 * coef[2, k], coef[0, k] + coef[1, k], x)
+            quadratic(coef[0, k] - coef[1, k], 2 * coef[2, k], coef[0, k] + coef[1, k], x)
             found, shift = 2, 0.0
         else:
             for j in range(5):
@@ -166,7 +53,7 @@ def _window_roots(coef, solve, span, to_quartic, phi, all_linear, times, owners)
                 for i in range(5):
                     acc += coef[i, k] * to_quartic[i, j]
                 poly[j] = acc
-            quartic_roots(poly, lo, hi, x)
+            quartic(poly, lo, hi, x)
             found, shift = 4, phi
         for i in range(found):
             if np.isnan(x[i]):
@@ -286,7 +173,8 @@ def structure(pair_prims, pair_obs, pair_free, contact_obs, plain: bool) -> tupl
 
 
 def warm_up() -> None:
-    """Compile ``first_exits`` for the HMC loop's argument types, or load it from the cache
+    """Compile ``first_exits`` for the HMC loop's argument types and the batched root solvers
+    of the line scans (``roots``: Gibbs, seeding descents), or load them from the cache
     (``__pycache__`` next to this file, else numba's user-wide cache): the first call after an
     installation compiles for ~10 s, later processes load it in well under a second. The
     inference node calls this at start-up, so that its first posterior is not the one that
@@ -302,3 +190,5 @@ def warm_up() -> None:
         False,
         structure(np.zeros((1, 1)), np.zeros(1), np.ones(1), np.zeros(1), False),
     )
+    quadratic_batch(np.ones(1), np.zeros(1), -np.ones(1))
+    quartic_batch(np.ones((1, 5)), np.zeros(1), np.ones(1))

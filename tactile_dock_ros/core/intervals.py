@@ -17,128 +17,28 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import log_ndtr, ndtri_exp
 
-# Roots of a primitive whose imaginary part is below this (relative) are taken as real: a
-# spurious root only splits a segment in two, which the midpoint test makes harmless.
-IMAG_TOL = 1e-6
-_MINUS_PLUS = np.array([-1.0, 1.0])
+from . import roots
+
 ROOT_MIN_TIME = 1e-9  # rad: roots of an ellipse this close to its start are the bounce just made
 
 
 def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form."""
+    """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form
+    (``roots.quadratic``)."""
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
-    scale = np.maximum(np.maximum(np.abs(a), np.abs(b)), np.abs(c))
-    scale = np.where(scale > 0, scale, 1.0)
-    a, b, c = a / scale, b / scale, c / scale
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        disc = b * b - 4 * a * c
-        q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
-        r1 = np.where(a != 0, q / a, -c / b)
-        r2 = np.where(a != 0, c / q, np.nan)
-        bad = (disc < 0) & (a != 0)
-        roots = np.stack([np.where(bad, np.nan, r1), np.where(bad, np.nan, r2)], axis=-1)
-    return np.where(np.isfinite(roots), roots, np.nan)
-
-
-def _companion_roots(coef: np.ndarray) -> np.ndarray:
-    """Real roots (n, 4) of quartics coef (n, 5), scaled to max |coef| = 1, by batched
-    companion-matrix eigenvalues. A vanishing leading coefficient is replaced by a tiny one,
-    which sends that root to infinity without moving the finite ones."""
-    lead = coef[:, :1]
-    tiny = 1e-13
-    lead = np.where(np.abs(lead) < tiny, np.where(lead < 0, -tiny, tiny), lead)
-    comp = np.zeros((len(coef), 4, 4))
-    comp[:, 0, :] = -coef[:, 1:] / lead
-    comp[:, 1, 0] = comp[:, 2, 1] = comp[:, 3, 2] = 1.0
-    eig = np.linalg.eigvals(comp)
-    real = np.abs(eig.imag) <= IMAG_TOL * (1.0 + np.abs(eig.real))
-    return np.where(real, eig.real, np.nan)
-
-
-def _ferrari_roots(coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Real roots (n, 4) of quartics coef (n, 5) (scaled, leading coefficient not tiny) in
-    closed form, and a mask of the rows the closed form cannot split (q ~ 0, left to the
-    caller). The depressed quartic y^4 + p y^2 + q y + r splits into the two quadratics
-    y^2 -+ s y + p/2 + m +- q / (2 s), s = sqrt(2 m), with m > 0 the largest root of the
-    resolvent cubic m^3 + p m^2 + (p^2/4 - r) m - q^2/8 (Cardano / Viete, Newton-polished).
-    Complex pairs whose imaginary part is below IMAG_TOL (1 + |real part|) count as a double
-    real root (as in ``_companion_roots``); every root gets one Newton step on the quartic."""
-    a, b, c, d = (coef[:, 1:] / coef[:, :1]).T
-    a2 = a * a
-    p = b - 0.375 * a2
-    q = c - 0.5 * a * b + 0.125 * a2 * a
-    r = d - 0.25 * a * c + (b / 16 - 3 * a2 / 256) * a2
-    # resolvent cubic, depressed with m = t - p/3: t^3 + P t + Q = 0
-    big_p = -p * p / 12 - r
-    big_q = (r / 3 - p * p / 108) * p - q * q / 8
-    disc = 0.25 * big_q * big_q + big_p**3 / 27
-    three_real = disc < 0  # then big_p < 0: Viete's largest root
-    root3 = np.sqrt(np.maximum(-big_p / 3, 1e-100))
-    t = 2 * root3 * np.cos(np.arccos(np.clip(-0.5 * big_q / root3**3, -1, 1)) / 3)
-    w = np.cbrt(-0.5 * big_q - np.copysign(np.sqrt(np.maximum(disc, 0.0)), big_q))
-    w = np.where(w == 0, 1e-300, w)
-    m = np.where(three_real, t, w - big_p / (3 * w)) - p / 3
-    c1 = 0.25 * p * p - r
-    df = (3 * m + 2 * p) * m + c1
-    step = (((m + p) * m + c1) * m - 0.125 * q * q) / np.where(df != 0, df, np.inf)
-    # a polish, not a search: near a double root (df ~ 0) the step would be meaningless
-    m -= np.where(np.abs(step) <= 1e-6 * (1 + np.abs(m)), step, 0.0)
-    s = np.sqrt(np.maximum(2 * m, 0.0))
-    split = s > 1e-7 * (1 + np.sqrt(np.abs(p)))
-    s = np.where(split, s, 1.0)
-    lin = s[:, None] * _MINUS_PLUS  # (n, 2) monic quadratics y^2 + lin y + const
-    const = (0.5 * p + m)[:, None] - (0.5 * q / s)[:, None] * _MINUS_PLUS
-    disc2 = lin * lin - 4 * const
-    real = disc2 >= -4 * IMAG_TOL**2 * ((1 + 0.5 * s) ** 2)[:, None]
-    half = -0.5 * (lin + np.copysign(np.sqrt(np.maximum(disc2, 0.0)), lin))  # |half| >= s/2
-    x = np.empty((len(coef), 4))
-    x[:, :2], x[:, 2:] = half, const / half
-    x -= 0.25 * a[:, None]
-    x[:, :2][~real] = np.nan
-    x[:, 2:][~real] = np.nan
-    f = (((coef[:, :1] * x + coef[:, 1:2]) * x + coef[:, 2:3]) * x + coef[:, 3:4]) * x
-    df = ((4 * coef[:, :1] * x + 3 * coef[:, 1:2]) * x + 2 * coef[:, 2:3]) * x + coef[:, 3:4]
-    x -= (f + coef[:, 4:]) / np.where(np.abs(df) > 1e-12, df, np.inf)
-    return x, ~split
-
-
-def _horner(coef: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Values (n, j) of quartics coef (n, 5) at u (n, j)."""
-    val = coef[:, :1] * u + coef[:, 1:2]
-    for j in range(2, 5):
-        val = val * u + coef[:, j : j + 1]
-    return val
+    flat = (np.ascontiguousarray(v).reshape(-1) for v in (a, b, c))
+    return roots.quadratic_batch(*flat).reshape(*a.shape, 2)
 
 
 def quartic_roots(coef: np.ndarray, window: tuple | None = None) -> np.ndarray:
     """Real roots (n, 4) of polynomials with coefficients (n, 5), highest degree first (NaN
-    where absent).
-
-    Closed form (``_ferrari_roots``), which costs a few dozen vectorized operations instead of
-    one LAPACK call per polynomial. Polynomials for which the closed form is unreliable are
-    solved by companion-matrix eigenvalues instead: a leading coefficient below 1e-3 of the
-    largest (roots far out, cancellation), non-finite results, and, if ``window`` = (lo, hi)
-    (scalars or (n,)) is given, a count of roots in (lo, hi) whose parity disagrees with the
-    sign change of the polynomial across it (a missed crossing).
-    """
-    coef = np.asarray(coef, dtype=float).reshape(-1, 5)
-    scale = np.abs(coef).max(axis=1, keepdims=True)
-    zero = scale[:, 0] == 0
-    coef = coef / np.where(zero[:, None], 1.0, scale)
-    closed = np.abs(coef[:, 0]) >= 1e-3
-    x, bad = _ferrari_roots(np.where(closed[:, None], coef, 1.0))
-    bad |= ~closed | np.isinf(x).any(axis=1)
+    where absent): ``roots.quartic`` (closed form, companion-matrix fallback) with the window
+    (lo, hi) (scalars or (n,)) of its missed-crossing check, if given."""
+    coef = np.ascontiguousarray(coef, dtype=float).reshape(-1, 5)
+    ends = np.full((2, len(coef)), np.nan)
     if window is not None:
-        ends = np.empty((len(coef), 2))
-        ends[:, 0], ends[:, 1] = window
-        inside = ((x > ends[:, :1]) & (x < ends[:, 1:])).sum(axis=1)
-        val = _horner(coef, ends)
-        bad |= (inside % 2 == 1) != (val[:, 0] * val[:, 1] < 0)
-    bad &= ~zero
-    if bad.any():
-        x[bad] = _companion_roots(coef[bad])
-    x[zero] = np.nan
-    return x
+        ends[0], ends[1] = window
+    return roots.quartic_batch(coef, ends[0], ends[1])
 
 
 def trig_basis(t: np.ndarray) -> np.ndarray:
