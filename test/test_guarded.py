@@ -9,7 +9,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_dock_ros.core.history import Status
-from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
+from tactile_dock_ros.execution.guarded import (
+    ForceFilter,
+    GuardedRun,
+    Limits,
+    Settings,
+    move_seconds,
+)
 from tactile_dock_ros.execution.mock_physics import PointToolSim
 from tactile_dock_ros.execution.types import Outcome, PlanCommand
 
@@ -165,6 +171,19 @@ def test_a_far_first_waypoint_is_reached_by_an_extra_move():
     assert list(run.history.status) == [Status.FREE, Status.FREE, Status.STICK]
 
 
+def test_a_plan_of_many_short_waypoints_finishes_within_its_time_budget():
+    """Each waypoint is approached exponentially (``move_seconds``): 40 waypoints 6 mm apart
+    take ~11 s at 0.2 m/s (13.5 s in the simulator), more than 3 x length / speed + margin
+    (8.6 s, the old budget that ABORTED such a plan in the node suite). The budget counts the
+    approaches."""
+    waypoints = np.column_stack([np.linspace(0.0, 0.24, 41), np.full(41, 0.3)])
+    run, _, commanded = _execute(FLOOR, waypoints, speed=0.2)
+    assert run.outcome is Outcome.NO_CONTACT, run.detail  # the loading move ends in the air
+    ideal = move_seconds(waypoints, 0.2, SETTINGS)
+    assert len(commanded) * DT > 3 * 0.24 / 0.2 + SETTINGS.time_margin  # the old budget
+    assert ideal < len(commanded) * DT < 1.5 * ideal  # the model, and the sim's lag behind it
+
+
 def test_commands_never_exceed_the_speed_limit():
     limits = Limits(LIMITS.workspace_min, LIMITS.workspace_max, 0.05, 40.0, 0.5)
     run, _, commanded = _execute(FLOOR, [[0.0, 0.3], [0.0, -0.1]], limits=limits, speed=0.05)
@@ -259,7 +278,7 @@ def test_a_tool_still_pressed_after_the_retreat_moves_along_the_force_until_rele
     reading does not point out of the surface) ends it at once."""
     plan = _plan([[0.0, 0.1], [0.0, -0.5], [0.5, -0.5]])
     run = GuardedRun(plan, np.array([0.0, 0.1]), LIMITS, SETTINGS, 0.0)
-    budget = 3 * 1.1 / 0.1 + SETTINGS.time_margin  # 3 x path length / speed + margin, s
+    budget = 3 * move_seconds(plan.waypoints, 0.1, SETTINGS) + SETTINGS.time_margin
     tool, t = np.array([0.0, 0.0]), budget - 0.3
     run.step(t, tool, np.array([3.0, 4.0]), 0.0)  # collided on the prefix move
     pressed_until = 0.006 if wall == "released" else np.inf

@@ -111,3 +111,12 @@ def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
 def _prior_msg():
     prior = problems.get("sloper").prior
     return convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane"))
+
+
+def test_the_node_compiles_the_hmc_exit_search_at_start_up(tmp_path, monkeypatch):
+    """numba compiles the HMC loop's exit search on its first call (~10 s after an install):
+    the node pays it while starting, not in its first posterior after a contact."""
+    calls = []
+    monkeypatch.setattr(inference_node.hmc_exit, "warm_up", lambda: calls.append("warm_up"))
+    with node_with_driver(launch_nodes("mock")["inference"], tmp_path):
+        assert calls == ["warm_up"]

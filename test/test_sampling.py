@@ -447,18 +447,32 @@ class _WalkRunner:
 def test_a_chain_that_never_verifies_does_not_empty_the_run(monkeypatch, caplog, kick):
     """Chain 0 starts at z_0 = 10, where every draw fails the exact test. It restarts from a
     full chain (and verifies) or, when it fails again, is dropped with a warning; the other
-    chains keep their full length (before: every chain was cut to chain 0's zero draws)."""
+    chains keep their full length (before: every chain was cut to chain 0's zero draws). The
+    restart comes once the stalled chain has verified nothing in 2 x 30 steps, not after all
+    200 allowed steps of every chain."""
     monkeypatch.setattr(sampling, "_consistent_rows", lambda shape, history, z: z[:, 0] < 5)
     run = sampling._ChainRun(_WalkRunner(kick), None, None, 30, 1, 5, 200, np.random.default_rng(1))
     z0 = np.zeros((6, 3))
     z0[0, 0] = 10.0
     with caplog.at_level("WARNING", logger=sampling.__name__):
         draws, last, kept = run(z0)
+    # stalled after 60 steps; the restart verifies in 30 (or, kicked again, stalls after 60)
+    assert run.steps == (60 + 60 if kick else 60 + 30)
     assert draws.shape == ((5, 30, 3) if kick else (6, 30, 3))
     assert np.all(draws[..., 0] < 5)
     assert kept.tolist() == ([1, 2, 3, 4, 5] if kick else list(range(6)))
     assert last.shape == (len(kept), 3) and np.all(last[:, 0] < 5)
     assert ("1 of 6 walk chains dropped" in caplog.text) == kick
+
+
+def test_a_chain_verifying_slowly_is_not_taken_for_stalled():
+    """Only chains without any verified draw stall a collection, and only while at least half
+    the chains are full."""
+    assert sampling._stalled([30, 30, 30, 0], 30)
+    assert not sampling._stalled([30, 30, 30, 1], 30)  # slow, not stalled: keep running
+    assert not sampling._stalled([30, 0, 0, 0], 30)  # most chains short: no restart source
+    assert not sampling._stalled([30, 30, 30, 30], 30)
+    assert sampling._stalled([0], 30, full_elsewhere=5)  # a restarted chain, the rest full
 
 
 def test_split_rhat_and_trapped_chains_on_synthetic_draws():

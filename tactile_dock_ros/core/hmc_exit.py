@@ -11,7 +11,9 @@ infeasible one. Decision (not in the paper): numba, compiled on first use and ca
 this file; the roots come from the same solvers as the batched interval algebra's
 (``roots.quartic``: Ferrari closed form, Newton polish, companion-matrix eigenvalues where the
 closed form is unreliable or misses a sign change across the window), so the draws match the
-numpy search up to rounding.
+numpy search up to rounding. numba invalidates a cached function when its own file changes, not
+when a function it calls from another file does: after editing ``roots.py`` in a work tree,
+delete ``core/__pycache__/*.nb?`` (an installed package never changes under its cache).
 
 Segment judging (the ``live`` pairs of ``HistoryConstraints.live_pairs``): a free
 observation is violated where any of its live pairs is crossed (pair value > 0), a contact

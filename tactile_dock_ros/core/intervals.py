@@ -26,7 +26,8 @@ def quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Real roots (..., 2) of a x^2 + b x + c (NaN where absent); cancellation-free form
     (``roots.quadratic``)."""
     a, b, c = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, b, c)))
-    flat = (np.ascontiguousarray(v).reshape(-1) for v in (a, b, c))
+    # fresh writeable contiguous copies: one compiled signature (broadcast views are read-only)
+    flat = (np.require(v, float, ["C", "W", "O"]).reshape(-1) for v in (a, b, c))
     return roots.quadratic_batch(*flat).reshape(*a.shape, 2)
 
 

@@ -107,19 +107,18 @@ def quartic(poly, lo, hi, x):
         x[:] = np.nan
         return
     c = poly / scale
-    bad = True
-    if abs(c[0]) >= 1e-3:
-        bad = not _ferrari(c, x)
-    inside = 0
-    for i in range(4):
-        if np.isinf(x[i]):
-            bad = True
-        if x[i] > lo and x[i] < hi:
-            inside += 1
-    if (inside % 2 == 1) != (_horner(c, lo) * _horner(c, hi) < 0):
-        bad = True
-    if bad:
-        _companion(c, x)
+    if abs(c[0]) >= 1e-3 and _ferrari(c, x):
+        inside = 0
+        for i in range(4):
+            if np.isinf(x[i]):
+                inside = -1  # not finite: the companion matrix decides
+                break
+            if x[i] > lo and x[i] < hi:
+                inside += 1
+        crossing = _horner(c, lo) * _horner(c, hi) < 0
+        if inside >= 0 and (inside % 2 == 1) == crossing:
+            return
+    _companion(c, x)
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -85,10 +85,25 @@ class Settings:
     load_speed: float = 0.02  # pushing speed of the stick/slip test
     retreat_distance: float = 0.02
     approach_gain: float = 4.0  # speed = min(max_speed, gain * remaining distance)
-    time_margin: float = 5.0  # time budget = 3 * path length / speed + margin
+    time_margin: float = 5.0  # time budget = 3 * ideal move time (``move_seconds``) + margin
     settle_time: float = 0.3  # a compliant slide is stuck after holding still this long
     max_slide: float = 0.3  # a compliant slide longer than this fails
     released_fraction: float = 0.25  # below this fraction of the contact threshold: free
+
+
+def move_seconds(path: np.ndarray, speed: float, settings: Settings) -> float:
+    """Seconds the move controller ideally needs along ``path`` (n, 2): it approaches each
+    waypoint at min(speed, approach_gain * remaining) until within waypoint_tolerance, so a
+    segment of length d takes (d - k) / speed at full speed plus ln(min(d, k) / tolerance) /
+    approach_gain of exponential approach, k = speed / approach_gain (ln 25 / 4 = 0.8 s per
+    waypoint at 0.2 m/s). Decision: the plan's time budget is 3x this plus ``time_margin``;
+    before, 3 x length / speed, which a plan of 42 short waypoints (node suite, sloper seed 2,
+    8.5 s budget) overran and ABORTED."""
+    d = np.linalg.norm(np.diff(np.asarray(path, float), axis=0), axis=1)
+    knee = speed / settings.approach_gain
+    cruise = np.maximum(d - knee, 0.0) / speed
+    approach = np.log(np.maximum(np.minimum(d, knee) / settings.waypoint_tolerance, 1.0))
+    return float(np.sum(cruise + approach / settings.approach_gain))
 
 
 class _Phase(Enum):
@@ -164,8 +179,8 @@ class GuardedRun:
         self._path = np.vstack([tool, waypoints]) if far else np.vstack([tool, waypoints[1:]])
         self._move_start = tool
         self._speed = min(self.plan.max_speed, self.limits.max_speed)
-        length = np.linalg.norm(np.diff(self._path, axis=0), axis=1).sum()
-        self._budget = 3.0 * length / self._speed + self.settings.time_margin
+        ideal = move_seconds(self._path, self._speed, self.settings)
+        self._budget = 3.0 * ideal + self.settings.time_margin
         if self.plan.compliant:  # room for a slide at the loading speed, and for settling
             slide = self.settings.max_slide / min(self.settings.load_speed, self._speed)
             self._budget += slide + self.settings.settle_time
