@@ -725,10 +725,9 @@ class _ChainRun:
         ``full_elsewhere``: full chains of the same run outside ``z`` (a restart's)."""
         chains, m = z.shape
         chain_draws = [[] for _ in range(chains)]
-        steps = 0
-        while min(len(c) for c in chain_draws) < self.per_chain and steps < self.max_steps:
-            need = self.per_chain - min(len(c) for c in chain_draws)
-            count = min(need, self.max_steps - steps)
+        counts, steps = [0] * chains, 0
+        while min(counts) < self.per_chain and steps < self.max_steps:
+            count = min(self.per_chain - min(counts), self.max_steps - steps)
             burn = 0 if steps else self.burn_in
             block = self.runner.run(z, count, thin=self.thin, burn_in=burn)  # (C, B, m)
             z, steps = block[:, -1], steps + count
