@@ -4,16 +4,17 @@ The HMC loop (``sampling.hmc_chains``) needs, per chain and window [0, span], th
 feasible interval that contains t = 0 (Sec. IV-E, Alg. 1): the roots of the primitives that
 may vanish, sorted, and the first segment whose midpoint violates an observation. The numpy
 version of this search (``intervals.ellipse_roots`` + ``segment_edges``, then every chain's
-segments judged in chunks) spent ~55 % of a three_ledges cycle in a few dozen array calls per
-iteration for ~10 roots and a handful of segments per chain. Here each chain is one compiled
-loop that solves its roots, walks its segments in time order and stops at the first
-infeasible one. Decision (not in the paper): numba, compiled on first use and cached next to
-this file; the roots come from the same solvers as the batched interval algebra's
-(``roots.quartic``: Ferrari closed form, Newton polish, companion-matrix eigenvalues where the
-closed form is unreliable or misses a sign change across the window), so the draws match the
-numpy search up to rounding. numba invalidates a cached function when its own file changes, not
-when a function it calls from another file does: after editing ``roots.py`` in a work tree,
-delete ``core/__pycache__/*.nb?`` (an installed package never changes under its cache).
+segments judged in chunks) spent ~55 % of the HMC loop (~45 % of a three_ledges cycle) in a
+few dozen array calls per iteration for ~10 roots and a handful of segments per chain. Here
+each chain is one compiled loop that solves its roots, walks its segments in time order and
+stops at the first infeasible one. Decision (not in the paper): numba, compiled on first use
+and cached next to this file; the roots come from the same solvers as the batched interval
+algebra's (``roots.quartic``: Ferrari closed form, Newton polish, companion-matrix eigenvalues
+where the closed form is unreliable or misses a sign change across the window), so the draws
+match the numpy search up to rounding. numba invalidates a cached function when its own file
+changes, not when a function it calls from another file does: after editing ``roots.py`` in a
+work tree, delete ``core/__pycache__/*.nb?`` (an installed package never changes under its
+cache).
 
 Segment judging (the ``live`` pairs of ``HistoryConstraints.live_pairs``): a free
 observation is violated where any of its live pairs is crossed (pair value > 0), a contact
