@@ -3,8 +3,10 @@ main."""
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import inspect
+import signal
 import sys
 import time
 from collections import Counter
@@ -132,13 +134,28 @@ class Stopwatch:
         self.seconds = time.perf_counter() - self._t0
 
 
+STACK_DUMP_SIGNAL = getattr(signal, "SIGUSR1", None)  # None on Windows
+
+
+def dump_stacks_on_signal() -> None:
+    """Make ``kill -USR1 <pid>`` print the Python stack of every thread to stderr (the node's
+    log), also while the node computes in numpy or compiled code; the node is not disturbed.
+
+    Decision: a node that goes silent on the robot (a sampler that runs for a minute) must be
+    diagnosable where it hangs, without a debugger or a restart that loses the state."""
+    if STACK_DUMP_SIGNAL is not None:
+        faulthandler.register(STACK_DUMP_SIGNAL, file=sys.stderr, all_threads=True)
+
+
 def run(
     node_class: type[Node],
     args: list[str] | None = None,
     executor: Callable[[], Executor] = SingleThreadedExecutor,
 ) -> int:
     """Console entry point: init, spin with ``executor()`` until shutdown, clean up; parameter
-    errors exit 2."""
+    errors exit 2. SIGUSR1 prints every thread's Python stack to stderr and the node goes on
+    (``dump_stacks_on_signal``)."""
+    dump_stacks_on_signal()
     rclpy.init(args=args)
     node = None
     try:

@@ -13,9 +13,11 @@ import random
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from tactile_dock_ros.nodes.common import STACK_DUMP_SIGNAL
 from tactile_dock_ros.tools import launch_xml
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # source tree: launch/, config/, scripts/
@@ -98,3 +100,32 @@ def stop(processes: Iterable[subprocess.Popen], timeout_s: float = 10.0) -> None
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
+
+
+STACK_MARKER = "most recent call first"  # faulthandler's header of each thread's stack
+
+
+def dump_stacks(
+    processes: dict[str, subprocess.Popen], log_dir: Path, timeout_s: float = 5.0
+) -> list[str]:
+    """Ask each running node for its threads' Python stacks (SIGUSR1, which every node's
+    ``common.run`` registers) and wait until its log shows them; returns the nodes that did.
+
+    For a node gone silent: where it computes is then in ``<log_dir>/<node>.log``."""
+    sizes = {}
+    for name, p in processes.items():
+        log = Path(log_dir) / f"{name}.log"
+        if STACK_DUMP_SIGNAL is not None and p.poll() is None and log.exists():
+            sizes[name] = log.stat().st_size
+            p.send_signal(STACK_DUMP_SIGNAL)
+    dumped: list[str] = []
+    deadline = time.monotonic() + timeout_s
+    while sizes and time.monotonic() < deadline:
+        for name in list(sizes):
+            with open(Path(log_dir) / f"{name}.log", errors="replace") as log:
+                log.seek(sizes[name])
+                if STACK_MARKER in log.read():
+                    dumped.append(name)
+                    del sizes[name]
+        time.sleep(0.05)
+    return dumped

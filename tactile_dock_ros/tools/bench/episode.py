@@ -6,7 +6,10 @@ for every problem of ``--problems``. Recorded: the final state and why (a GIVE_U
 the planner, the planner's cycle budget, or something else), the cycles, whether the truth is
 feasible (``simulate.feasible``, with ideal compliance and without: the mock profile plans
 non-compliant, config/mock.yaml), the episode wall time and the perception / inference /
-planning / execution latencies. Per problem: counts and medians over its episodes. The machine
+planning / execution latencies, and where the nodes' logs are (``log_dir``): an episode
+that ends neither DOCKED nor GAVE_UP (ABORTED, or no final state within ``--timeout``) first
+asks every node for its threads' stacks (``bringup.dump_stacks``), so a node that went silent
+shows where it computed. Per problem: counts and medians over its episodes. The machine
 may be shared: say so with the latencies. ``--repeats`` is not used (the seeds are the episodes).
 """
 
@@ -66,9 +69,15 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
     client = episode.EpisodeClient(context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(client)
+    log_dir = Path(tempfile.mkdtemp(prefix="bench_episode_"))
+    dumped = []
     try:
-        with bringup.running(arguments, Path(tempfile.mkdtemp(prefix="bench_episode_"))):
+        with bringup.running(arguments, log_dir) as processes:
             record = client.run(executor, timeout, progress=lambda line: print("   ", line))
+            if record.state not in ("DOCKED", "GAVE_UP"):
+                dumped = bringup.dump_stacks(processes, log_dir)
+                print(f"    {record.state}: node stacks dumped into {log_dir}/<node>.log: "
+                      f"{', '.join(dumped) or 'none'}", flush=True)  # fmt: skip
     finally:
         executor.shutdown()
         client.destroy_node()
@@ -95,6 +104,8 @@ def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
         "inference_s": stage("inference_s"),
         "planning_s": stage("planning_s"),
         "execution_s": stage("execution_s"),
+        "log_dir": str(log_dir),
+        "stacks_dumped": dumped,
     }
 
 
