@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from tactile_dock_ros.tools import bench
@@ -27,6 +28,8 @@ def test_docking_bench_small(tmp_path):
             assert e["chains_disagree"][0] is None
     ours, gw = report["results"]
     assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
+    low, high = ours["ours_over_best_baseline_ci95"]
+    assert 0 < low <= high
     calibration = {row["strategy"]: row for row in report["attempt_calibration"]}
     for row in report["results"]:
         cal = calibration[row["strategy"]]
@@ -36,6 +39,37 @@ def test_docking_bench_small(tmp_path):
         )
         assert sum(b["attempts"] for b in cal["bins"]) == cal["attempts"]
         assert 0.0 <= cal["brier"] <= 1.0
+
+
+def _episodes(instance_cycles, feasible=True):
+    return [{"instance": i, "cycles": c, "feasible": feasible} for i, c in instance_cycles]
+
+
+def test_ratio_interval_resamples_truths_paired_and_averages_their_seeds():
+    rng = np.random.default_rng(0)
+    ours = _episodes([(0, 1), (1, 1), (2, 1)])
+    gw = _episodes([(0, 2), (1, 2), (2, 2)])
+    ig = _episodes([(0, 4), (1, 4), (2, 4)])
+    assert docking.ratio_interval(ours, [gw, ig], rng) == pytest.approx([0.5, 0.5])
+    # truth 0's two seeds average to 2 = gw's: paired, every replicate lies in [0.5, 1]
+    ours = _episodes([(0, 1), (0, 3), (1, 1), (2, 1)]) + _episodes([(3, 9)], feasible=False)
+    low, high = docking.ratio_interval(ours, [gw, ig], rng)
+    assert 0.5 <= low < high <= 1.0
+    assert docking.ratio_interval(ours[:2], [gw, ig], rng) is None  # one shared truth
+
+
+def test_episode_seeds_repeat_each_truth_with_its_own_sampler_seed(tmp_path):
+    out = tmp_path / "seeds.json"
+    argv = ["docking", "--instances", "2", "--max-cycles", "1", "--problems", "notch"]
+    argv += ["--prior", "problem", "--mode", "compliant", "--strategies", "ours"]
+    assert bench.main([*argv, "--episode-seeds", "2", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    (row,) = report["results"]
+    truth_seeds = {tuple(e["seed"][:4]) for e in row["episodes"]}
+    expected = [docking.episode_seed(t, r) for t in truth_seeds for r in (0, 1)]
+    assert report["episode_seeds"] == 2 and row["instances"] == 4 and len(truth_seeds) == 2
+    assert sorted(tuple(e["seed"]) for e in row["episodes"]) == sorted(expected)
+    assert len(set(expected)) == 4 and docking.episode_seed(next(iter(truth_seeds)), 0) in expected
 
 
 def test_a_cycle_with_a_history_reports_its_chains_check(tmp_path):

@@ -13,12 +13,13 @@ prior and per mode:
 
 Reported per problem, prior, mode and strategy: feasible count, success on feasible truths,
 cycles on feasible truths (mean, std, max), how infeasible truths end (the planner's give-up,
-its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's, and
-the wall time of one cycle (inference + planning): median over all cycles, over the cycles
-after each episode's first (with a history), and the maximum; and ``disagree``, the fraction of
-the cycles whose sampler could check its chains (MCMC with enough draws) where they disagreed
-(split R-hat over its limit or a trapped chain: ``sampling`` warns then; per cycle in each
-episode's ``chains_disagree``, None where nothing was checked).
+its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's with
+its 95 % bootstrap interval over the truths (``ratio_interval``), and the wall time of one cycle
+(inference + planning): median over all cycles, over the cycles after each episode's first (with
+a history), and the maximum; and ``disagree``, the fraction of the cycles whose sampler could
+check its chains (MCMC with enough draws) where they disagreed (split R-hat over its limit or a
+trapped chain: ``sampling`` warns then; per cycle in each episode's ``chains_disagree``, None
+where nothing was checked).
 
 Also reported, per prior, mode and strategy (problems pooled): how well the planner's predicted
 P_dock of each executed attempt matched what happened (``attempt_calibration``): the attempts,
@@ -27,7 +28,9 @@ planner that keeps predicting 15 % for attempts that dock 4 % of the time keeps 
 infeasible terrain: the table measures that overconfidence instead of leaving it to be guessed
 from the give-up counts. With ``--workers N`` episodes run
 in N processes (per-episode seeds do not depend on N); cycle times are then per process on a
-machine running N episodes at once. Episodes are the repetitions: ``--repeats`` is not used.
+machine running N episodes at once. Episodes are the repetitions: ``--repeats`` is not used;
+``--episode-seeds K`` runs K episodes per truth with different sampler seeds, and the counts
+(``instances``, feasible, give-ups) are then over episodes, K per truth.
 """
 
 from __future__ import annotations
@@ -112,6 +115,13 @@ def add_arguments(parser) -> None:
         help="the planner gives up below this best P_dock (default: the mock profile's; "
         "the paper's experiments: 0.001)",
     )
+    parser.add_argument(
+        "--episode-seeds",
+        type=_at_least(1),
+        default=1,
+        help="episodes per truth, prior, mode and strategy, each with its own sampler seed (the "
+        "first as with 1): averages out outcomes that change from seed to seed",
+    )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
 
@@ -135,6 +145,12 @@ class _Task:
 @functools.cache
 def _problem(name: str) -> problems.Problem:
     return problems.get(name)
+
+
+def episode_seed(seed: tuple[int, ...], repeat: int) -> tuple[int, ...]:
+    """The sampler seed of a truth's ``repeat``-th episode (``--episode-seeds``); the first is
+    the truth's own, so one episode per truth runs as before the option existed."""
+    return tuple(seed) if repeat == 0 else (*seed, repeat)
 
 
 def _episode(task: _Task) -> dict:
@@ -321,8 +337,12 @@ def _calibration_line(row: dict) -> str:
     )
 
 
+RATIO_RESAMPLES = 2000  # bootstrap replicates of ``ratio_interval``
+
+
 def _ratios(results: list[dict]) -> None:
-    """Ours' mean cycles over the better (lower) of GW and IG, per problem, prior and mode."""
+    """Ours' mean cycles over the better (lower) of GW and IG, per problem, prior and mode, and
+    its 95 % bootstrap interval over the truths (``ratio_interval``)."""
     groups: dict[tuple, dict[str, dict]] = {}
     for row in results:
         groups.setdefault((row["problem"], row["prior"], row["mode"]), {})[row["strategy"]] = row
@@ -330,17 +350,56 @@ def _ratios(results: list[dict]) -> None:
         baselines = [rows[s]["cycles_mean"] for s in ("gw", "ig") if s in rows]
         baselines = [b for b in baselines if b is not None]
         if "ours" in rows and baselines and rows["ours"]["cycles_mean"] is not None:
-            rows["ours"]["ours_over_best_baseline"] = rows["ours"]["cycles_mean"] / min(baselines)
+            ours = rows["ours"]
+            ours["ours_over_best_baseline"] = ours["cycles_mean"] / min(baselines)
+            others = [rows[s]["episodes"] for s in ("gw", "ig") if s in rows]
+            interval = ratio_interval(ours["episodes"], others, np.random.default_rng(0))
+            ours["ours_over_best_baseline_ci95"] = interval
+
+
+def _cycles_by_truth(episodes: list[dict]) -> dict[int, float]:
+    """Mean cycles of each feasible truth's episodes (its ``--episode-seeds``)."""
+    by_truth: dict[int, list[int]] = {}
+    for e in episodes:
+        if e["feasible"]:
+            by_truth.setdefault(e["instance"], []).append(e["cycles"])
+    return {i: float(np.mean(c)) for i, c in by_truth.items()}
+
+
+def ratio_interval(
+    ours: list[dict], baselines: list[list[dict]], rng: np.random.Generator
+) -> list[float] | None:
+    """95 % percentile-bootstrap interval of ours' mean cycles over the better baseline's, the
+    feasible truths resampled with replacement (each truth with all its episodes, for every
+    strategy alike: the comparison stays paired); None with fewer than 2 shared truths.
+
+    Decision: the truths are the unit of variation (one run per truth cannot rank two methods
+    whose outcomes change from seed to seed; ``--episode-seeds`` averages those within a truth),
+    and the better baseline is chosen again in each replicate."""
+    tables = [_cycles_by_truth(e) for e in (ours, *baselines)]
+    shared = sorted(set.intersection(*(set(t) for t in tables)))
+    if len(shared) < 2:
+        return None
+    cycles = np.array([[t[i] for i in shared] for t in tables])  # (strategies, truths)
+    pick = rng.integers(0, len(shared), size=(RATIO_RESAMPLES, len(shared)))
+    means = cycles[:, pick].mean(axis=2)  # (strategies, replicates)
+    ratio = means[0] / means[1:].min(axis=0)
+    return [float(q) for q in np.percentile(ratio, [2.5, 97.5])]
 
 
 def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _interval(bounds) -> str:
+    return "-" if bounds is None else f"{bounds[0]:.2f}-{bounds[1]:.2f}"
+
+
 HEADER = (
     f"{'problem':13} {'prior':7} {'mode':13} {'strategy':8} {'feas':>5} {'succ':>5} "
     f"{'cyc mean':>8} {'std':>5} {'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'cap':>3} "
-    f"{'err':>3} {'/best':>5} {'s/cycle':>7} {'later':>6} {'max s':>6} {'disagree':>8}"
+    f"{'err':>3} {'/best':>5} {'95% CI':>9} {'s/cycle':>7} {'later':>6} {'max s':>6} "
+    f"{'disagree':>8}"
 )
 
 
@@ -354,6 +413,7 @@ def _line(row: dict) -> str:
         f"{_fmt(row['infeasible_give_up_cycles_median'], '.1f'):>7} "
         f"{row['infeasible_cycle_cap']:>3} {row['errors']:>3} "
         f"{_fmt(row.get('ours_over_best_baseline'), '.2f'):>5} "
+        f"{_interval(row.get('ours_over_best_baseline_ci95')):>9} "
         f"{_fmt(row['cycle_seconds_median'], '.3f'):>7} "
         f"{_fmt(row['later_cycle_seconds_median'], '.3f'):>6} "
         f"{_fmt(row['cycle_seconds_max'], '.2f'):>6} "
@@ -432,12 +492,13 @@ def run(args) -> dict:
             truths[key[0]][i]["truth"],
             _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
             truths[key[0]][i]["feasible"][key[2]],
-            truths[key[0]][i]["seed"],
+            episode_seed(truths[key[0]][i]["seed"], repeat),
             max_cycles,
             args.samples,
             args.give_up_threshold,
         )
         for i in range(instances)
+        for repeat in range(args.episode_seeds)
         for key in keys
     ]
     records = _run_all(tasks, args.workers)
@@ -472,6 +533,7 @@ def run(args) -> dict:
         "max_cycles": max_cycles,
         "samples": args.samples,
         "give_up_threshold": args.give_up_threshold,
+        "episode_seeds": args.episode_seeds,
         "workers": args.workers,
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
