@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate
+from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate, slides
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.perception.config import PerceptionConfig
@@ -68,6 +68,30 @@ def test_infeasible_sloper_on_the_depth_prior_gives_up_without_compliance():
     assert "whole path" in result.message
     aims = [tuple(np.round(c.plan.target_point, 3)) for c in result.cycles_log[:-1]]
     assert len(set(aims)) == len(aims)  # no docking site tried twice
+
+
+def test_a_slide_down_a_smooth_slope_is_evidence_on_every_few_centimetres(monkeypatch):
+    # benchmark truth 1, compliant, 0.24 degrees too steep: each slide down its 24 cm slope was
+    # one trace piece, 3 slip rows over the depth prior's 12 edges there; the other edges kept
+    # their chance to hold and P_dock stayed at 0.7-0.9 to the cap. A row every 4 cm gives up.
+    problem = problems.get("sloper")
+    index = problems.names().index("sloper")
+    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 1]))
+    assert not simulate.feasible(problem, truth, compliant=True)
+    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
+    prior = depth_prior(truth, config, np.random.default_rng([0, index, 1, 2])).prior
+
+    def episode():
+        rng = np.random.default_rng([0, index, 1, 1])
+        return explore.run_episode(problem, truth, "ours", rng, 6, prior=prior)
+
+    result = episode()
+    assert result.outcome == "gave_up", result.message
+    slide_rows = np.diff([c.history_length for c in result.cycles_log])
+    monkeypatch.setattr(slides.crossed_piece_evidence, "__defaults__", (1.0,))  # one per piece
+    sparse = episode()
+    assert sparse.outcome == "cycle_cap" and min(c.plan.p_dock for c in sparse.cycles_log) > 0.5
+    assert np.diff([c.history_length for c in sparse.cycles_log])[0] < slide_rows[0]
 
 
 def test_same_seed_same_episode():

@@ -114,11 +114,16 @@ def test_compliant_slide_reports_every_edge_it_crossed_before_falling_off():
         BENT_SLOPE_THEN_CLIFF, [[0.0, 0.2], [0.0, -0.5]], compliant=True, lateral_stiffness=25.0
     )
     assert run.outcome is Outcome.CONTACT_FAILED and "lost contact" in run.detail, run.detail
-    assert list(run.history.status) == [Status.FREE, Status.SLIP_LEFT, Status.SLIP_LEFT]
-    middle = 0.5 * (run.history.a[-1] + run.history.b[-1])
-    assert middle == pytest.approx([0.1, -0.1185], abs=0.006)  # the 60 degree edge's middle
-    direction = run.history.b[-1] - run.history.a[-1]
-    assert direction == pytest.approx([0.0, -SETTINGS.contact_resolution])  # along the load
+    # the first contact, then one row per evidence_spacing (4 cm) of the 10 cm 60-degree edge
+    status = run.history.status
+    assert status[0] == Status.FREE and np.all(status[1:] == Status.SLIP_LEFT)
+    assert len(status) - 2 == 3, len(status)
+    middles = 0.5 * (run.history.a[2:] + run.history.b[2:])
+    assert middles.mean(axis=0) == pytest.approx([0.1, -0.1185], abs=0.006)  # the edge's middle
+    gaps = np.linalg.norm(np.diff(middles, axis=0), axis=1)
+    assert np.all(gaps <= SETTINGS.evidence_spacing + 1e-9) and np.all(gaps > 0.02)
+    direction = run.history.b[2:] - run.history.a[2:]
+    np.testing.assert_allclose(direction, [[0.0, -SETTINGS.contact_resolution]] * len(direction))
 
 
 def test_crossed_pieces_are_the_edges_between_the_trace_corners():

@@ -42,10 +42,25 @@ def test_pieces_near_the_load_direction_give_no_slip_observation():
     push = np.array([0.0, -1.0])
     starts = np.array([[0.0, 0.0], [0.1, -0.1], [0.3, -0.1]])
     ends = np.array([[0.1, -0.06], [0.102, -0.15], [0.32, -0.14]])  # 59, 2.3, 26.6 deg off load
-    evidence = slides.crossed_piece_evidence(starts, ends, push, 0.005, Status.SLIP_LEFT)
+    evidence = slides.crossed_piece_evidence(starts, ends, push, 0.005, Status.SLIP_LEFT, 1.0)
     np.testing.assert_allclose(0.5 * (evidence.a + evidence.b), [[0.05, -0.03]])
     np.testing.assert_allclose(evidence.b - evidence.a, [[0.0, -0.005]])
     assert evidence.status.tolist() == [Status.SLIP_LEFT]
+
+
+def test_a_crossed_piece_gives_one_observation_per_evidence_spacing():
+    push = np.array([0.0, -1.0])
+    starts, ends = np.array([[0.0, 0.0], [0.1, 0.0]]), np.array([[0.05, 0.0], [0.11, 0.0]])
+    evidence = slides.crossed_piece_evidence(starts, ends, push, 0.004, Status.SLIP_RIGHT, 0.02)
+    middles = 0.5 * (evidence.a + evidence.b)
+    np.testing.assert_allclose(middles[:, 0], [0.05 / 6, 0.025, 0.25 / 6, 0.105])  # 3 + 1 parts
+    np.testing.assert_allclose(evidence.b - evidence.a, np.tile([0.0, -0.004], (4, 1)))
+    assert evidence.status.tolist() == [Status.SLIP_RIGHT] * 4
+    default = slides.crossed_piece_evidence(starts, ends, push, 0.004, Status.SLIP_RIGHT)
+    assert len(default) == 2 + 1  # 5 cm and 1 cm at EVIDENCE_SPACING_M = 4 cm
+    for bad in (0.0, -0.01, np.nan):
+        with pytest.raises(ValueError, match="spacing"):
+            slides.crossed_piece_evidence(starts, ends, push, 0.004, Status.SLIP_RIGHT, bad)
 
 
 def test_a_level_edge_between_two_slide_observations_fails_the_sample():

@@ -185,7 +185,7 @@ def slide_evidence(
     Under compliance a slipping tool then slides along the surface up to the vertex where it
     separates (Sec. V-A2), pushing along ``load`` and slipping all the way. The robot knows its
     trace, a polyline whose corners are where its direction changed; each straight piece
-    between two corners (a surface edge crossed completely) gives one more slip observation
+    between two corners (a surface edge crossed completely) gives slip observations every 4 cm
     (``slides.crossed_piece_evidence``). Without this the posterior only learns that the first
     contacted edge slips and keeps proposing the edges the tool already slid over
     (three_ledges: P_dock stayed near 0.5 for 30 cycles on infeasible truths), so the give-up

@@ -2,7 +2,7 @@
 
 A slipping loading contact under compliance slides along the surface, in the slip direction,
 until it sticks at a feature or separates. The history records the slide as slip observations
-(eq. 13): the first contact, then one at the middle of every edge the trace crossed
+(eq. 13): the first contact, then one every 4 cm of every edge the trace crossed
 (``crossed_piece_evidence``, for the simulated robot's ``explore.slide_evidence`` and the
 executor's ``execution.guarded``). Each observation constrains
 only the edge it lands on, so a posterior sample may put a short edge that holds the load
@@ -23,17 +23,30 @@ from .geometry2d import cross
 from .history import History, Status
 
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
+EVIDENCE_SPACING_M = 0.04  # m between a slide's slip observations (crossed_piece_evidence)
 MIN_PIECE_SINE = 0.5  # crossed pieces closer than 30 degrees to the load give no observation
 
 
-def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status) -> History:
+def crossed_piece_evidence(
+    starts, ends, push, contact_resolution: float, status, spacing_m: float = EVIDENCE_SPACING_M
+) -> History:
     """The slip observations of the pieces ``starts`` -> ``ends`` (k, 2) of a slide that the tool
-    crossed completely after its first contact: one per piece, the observation the first contact
-    gave, at the piece's middle: a segment ``contact_resolution`` long along the unit ``push``
-    (the load) with the first contact's slip ``status`` (eq. 13).
+    crossed completely after its first contact: each piece cut into parts at most
+    ``spacing_m`` long, one observation per part, the observation the first contact gave, at
+    the part's middle: a segment ``contact_resolution`` long along the unit ``push`` (the
+    load) with the first contact's slip ``status`` (eq. 13).
 
-    Decision: one observation per piece; two per piece pinned the surface so tightly that the
-    sampler's seed search failed on three_ledges (and then dropped consistent observations).
+    Decision: an observation every ``spacing_m`` (EVIDENCE_SPACING_M = 4 cm, two depth-prior
+    vertex spacings). The trace shows the surface wherever the tool slid, and each observation
+    constrains only the prior edge it lands on: with one per straight piece a 24 cm slide down
+    a smooth slope gave 3 observations over the depth prior's 12 edges there, the other 9 kept
+    their prior chance to hold, and ``consistent_with_slides`` rejected 96-100 % of the
+    posterior samples every cycle, so the planner ignored the slides (sloper truth 1 of
+    ``bench docking``, depth prior, compliant: P_dock 0.7-0.9 for 12 cycles). 2 cm (every
+    prior edge) was measured too: it made near-critical slopes thin slabs for HMC (cycles of
+    3-5 minutes on three_ledges truth 19, the slowest ours cycle 11 s) for the same give-ups on
+    sloper. Stop 18 had tried two per piece on the problem priors, when the seed search still
+    stalled on the extra rows (it is bounded since).
     Decision: a piece within 30 degrees of ``push`` (|sin| < MIN_PIECE_SINE; e.g. the vertical
     wall below a ledge lip the tool drops along) gives none. A segment along ``push`` crosses
     such a piece only if the surface passes within contact_resolution * sin / 2 of its middle
@@ -44,7 +57,9 @@ def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status
     (``explore.slide_evidence``), or the straight runs of the executor's trace
     (``execution.guarded.crossed_pieces``).
     """
-    starts, ends = np.reshape(starts, (-1, 2)), np.reshape(ends, (-1, 2))
+    if not (np.isfinite(spacing_m) and spacing_m > 0):
+        raise ValueError(f"evidence spacing must be finite and > 0, got {spacing_m}")
+    starts, ends = _split(np.reshape(starts, (-1, 2)), np.reshape(ends, (-1, 2)), spacing_m)
     push = np.asarray(push, float)
     piece = ends - starts
     length = np.linalg.norm(piece, axis=1)
@@ -53,6 +68,15 @@ def crossed_piece_evidence(starts, ends, push, contact_resolution: float, status
     middle = 0.5 * (starts[keep] + ends[keep])
     half = 0.5 * contact_resolution * push
     return History(middle - half, middle + half, np.full(len(middle), int(status)))
+
+
+def _split(starts: np.ndarray, ends: np.ndarray, spacing_m: float):
+    """Each piece cut into ceil(length / spacing_m) equal parts: (starts, ends) of the parts."""
+    parts = np.maximum(np.ceil(np.linalg.norm(ends - starts, axis=1) / spacing_m), 1).astype(int)
+    owner = np.repeat(np.arange(len(starts)), parts)
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(parts) - parts, parts)  # part index
+    delta = (ends - starts)[owner] / parts[owner, None]
+    return starts[owner] + k[:, None] * delta, starts[owner] + (k + 1)[:, None] * delta
 
 
 def slide_groups(history: History, move_ids, dropped=()) -> list[np.ndarray]:

@@ -22,13 +22,13 @@ Decisions where the paper leaves the robot side open:
   load for ``contact_resolution`` with less than the plan's contact force resisting the load
   (free space or a wall along the load: the surface turned away, the separation of
   ``core.simulate``) or the slide exceeds ``max_slide``.
-  The evidence is that of ``core.explore``'s simulated robot: the status of the first contact
-  (the slip), even when the slide then sticks, and after a slide that ended in separation one
-  more slip observation for every edge the trace crossed completely toward the slip's side
-  (``crossed_pieces``, ``core.slides.crossed_piece_evidence``). A finite lateral stiffness
-  pulls back as the tool slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides may
-  stop on a slope that the paper's ideal compliance would slide down; the test reports the hold
-  the arm actually has.
+  The evidence is that of ``core.explore``'s simulated robot: the status of the first contact (the
+  slip), even when the slide then sticks, and after a slide that ended in separation slip
+  observations every ``evidence_spacing`` of each edge the trace crossed completely toward the
+  slip's side (``crossed_pieces``, ``core.slides.crossed_piece_evidence``). A finite lateral
+  stiffness pulls back as the tool slides (a 25 N/m arm 10 cm off its line: 2.5 N), so long slides
+  may stop on a slope that the paper's ideal compliance would slide down; the test reports the
+  hold the arm actually has.
 * Evidence, like ``core.simulate.guarded_path``: a FREE segment for the travelled part of each
   move, backed off by the contact resolution w from the contact point c, and a contact segment
   c - w/2 d -> c + w/2 d (d the move direction) with status COLLIDE (a prefix move hit
@@ -88,6 +88,7 @@ class Settings:
     time_margin: float = 5.0  # time budget = 3 * ideal move time (``move_seconds``) + margin
     settle_time: float = 0.3  # a compliant slide is stuck after holding still this long
     max_slide: float = 0.3  # a compliant slide longer than this fails
+    evidence_spacing: float = slides.EVIDENCE_SPACING_M  # one slip observation per this much slide
     released_fraction: float = 0.25  # below this fraction of the contact threshold: free
 
 
@@ -317,7 +318,9 @@ class GuardedRun:
                 side = left if self._slip == Status.SLIP_LEFT else -left
                 w = self.settings.contact_resolution
                 pieces = crossed_pieces(trace, w, side)
-                evidence = slides.crossed_piece_evidence(*pieces, d, w, self._slip)
+                evidence = slides.crossed_piece_evidence(
+                    *pieces, d, w, self._slip, self.settings.evidence_spacing
+                )
                 self._segments += zip(evidence.a, evidence.b, evidence.status, strict=True)
             why = "lost contact" if free else "exceeded max_slide"
             return self._start_retreat(tool, f"{how} and {why} under the load")

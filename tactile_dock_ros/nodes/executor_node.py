@@ -74,6 +74,14 @@ PARAMS = [
     _tuning("settle_time", "compliant slide: held this still under load = stuck", "s", 0.0, 10.0),
     _tuning("max_slide", "compliant slide: longer slides fail the attempt", "m", 0.0, 2.0),
     _tuning(
+        "evidence_spacing",
+        "compliant slide: one slip observation per this much of each crossed piece (a few of "
+        "the prior's vertex spacings: core.slides.EVIDENCE_SPACING_M)",
+        "m",
+        1e-3,
+        1.0,
+    ),
+    _tuning(
         "released_fraction",
         "after the retreat the tool moves along the force until it is below this fraction of "
         "the plan's contact threshold",
@@ -126,6 +134,7 @@ class ExecutorNode(Node):
             retreat_distance=self.p.retreat_distance,
             settle_time=self.p.settle_time,
             max_slide=self.p.max_slide,
+            evidence_spacing=self.p.evidence_spacing,
             released_fraction=self.p.released_fraction,
             approach_gain=self.p.approach_gain,
         )
