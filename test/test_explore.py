@@ -53,16 +53,23 @@ def test_infeasible_three_ledges_gives_up_once_its_slides_rule_out_every_hold():
     assert sum(c.rejected for c in result.cycles_log) > 0
 
 
+def _infeasible_bench_truth(name: str, instance: int, compliant: bool):
+    """Problem, truth ``instance`` of ``bench docking`` (seed 0, infeasible in the mode), its
+    depth prior as the bench perceives it, and the episode's sampler seed."""
+    problem = problems.get(name)
+    index = problems.names().index(name)
+    truth = problem.sample_ground_truth(np.random.default_rng([0, index, instance]))
+    assert not simulate.feasible(problem, truth, compliant=compliant)
+    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
+    prior = depth_prior(truth, config, np.random.default_rng([0, index, instance, 2])).prior
+    return problem, truth, prior, [0, index, instance, 1]
+
+
 def test_infeasible_sloper_on_the_depth_prior_gives_up_without_compliance():
     # benchmark truth 5, non-compliant: the planner re-planned a move already seen to slip
     # (probsim's fit kept 0.2-1 %, no sample docks) and ran to the cap before whole_path_p_dock
-    problem = problems.get("sloper")
-    index = problems.names().index("sloper")
-    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 5]))
-    assert not simulate.feasible(problem, truth, compliant=False)
-    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
-    prior = depth_prior(truth, config, np.random.default_rng([0, index, 5, 2])).prior
-    rng = np.random.default_rng([0, index, 5, 1])
+    problem, truth, prior, seed = _infeasible_bench_truth("sloper", 5, compliant=False)
+    rng = np.random.default_rng(seed)
     result = explore.run_episode(problem, truth, "ours", rng, 10, compliant=False, prior=prior)
     assert result.outcome == "gave_up", result.message
     assert "whole path" in result.message
@@ -74,15 +81,10 @@ def test_a_slide_down_a_smooth_slope_is_evidence_on_every_few_centimetres(monkey
     # benchmark truth 1, compliant, 0.24 degrees too steep: each slide down its 24 cm slope was
     # one trace piece, 3 slip rows over the depth prior's 12 edges there; the other edges kept
     # their chance to hold and P_dock stayed at 0.7-0.9 to the cap. A row every 4 cm gives up.
-    problem = problems.get("sloper")
-    index = problems.names().index("sloper")
-    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 1]))
-    assert not simulate.feasible(problem, truth, compliant=True)
-    config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
-    prior = depth_prior(truth, config, np.random.default_rng([0, index, 1, 2])).prior
+    problem, truth, prior, seed = _infeasible_bench_truth("sloper", 1, compliant=True)
 
     def episode():
-        rng = np.random.default_rng([0, index, 1, 1])
+        rng = np.random.default_rng(seed)
         return explore.run_episode(problem, truth, "ours", rng, 6, prior=prior)
 
     result = episode()
