@@ -14,13 +14,19 @@ per second, clamped to the edge and stopped by any other edge on the way. Edges 
 in ``core.shape``: walking c -> d the solid is on the left, the outward normal on the right.
 The measured force is the environment's force on the tool, -K (s - p), zero in free space.
 
-Decision: when the stiff axis turns by more than 30 degrees (a new move; a reversal keeps the
-axis), the setpoint is re-anchored so that the force stays continuous (bumpless transfer, as an
-impedance controller switching its stiffness does). Steering within a move (the executor aims
-at the waypoint from where the tool is) keeps the old model. Without it a
-deflection built up across the motion under the weak lateral spring became a push along the
-stiff new direction at once: after a slide and the executor's retreat, 4 cm at 25 N/m (1.3 N)
-turned into 19 N in one step (``test_a_new_motion_direction_keeps_the_contact_force_continuous``).
+Decision: when the commanded direction turns by more than 30 degrees (a new move, reversals
+included), the setpoint is re-anchored so that the force stays continuous (bumpless transfer, as
+an impedance controller switching its stiffness does); for an exact reversal K is unchanged and
+so is the setpoint. Steering within a move (the executor aims at the waypoint from where the
+tool is) keeps the old model. Without it a deflection built up across the motion under the weak
+lateral spring became a push along the stiff new direction at once: after a slide and the
+executor's retreat, 4 cm at 25 N/m (1.3 N) turned into 19 N in one step
+(``test_a_new_motion_direction_keeps_the_contact_force_continuous``). Until stop 27 a reversal
+kept the old model; a NEAR-reversal still turns the stiff axis (a retreat 16 degrees off the
+reverse of a move the tool slid along, then the release along the force): in the node suite the
+force jumped 3 -> 7 -> 15 N in two 5 ms steps with a 7 cm deflection, the executor's release
+stopped ("grew to ... N"), the tool stayed wedged and the planner gave up on a feasible
+three_ledges truth ("no way out").
 """
 
 from __future__ import annotations
@@ -115,7 +121,7 @@ class PointToolSim:
         velocity = np.asarray(velocity, float)
         speed = float(np.linalg.norm(velocity))
         if speed > 0:
-            turn = abs(float(velocity @ self.direction)) / speed  # |cos| of the turn
+            turn = float(velocity @ self.direction) / speed  # cos of the turn
             force = self.force
             self.direction = velocity / speed
             if turn < REANCHOR_COS:  # a new move, not steering within one
