@@ -14,6 +14,13 @@ from tactile_dock_ros.tools.episode import EpisodeRecord
     [
         ("DOCKED", "docked", "docked"),
         ("GAVE_UP", "best docking probability 2.00e-04 < threshold 0.001", "planner"),
+        (
+            "GAVE_UP",
+            "best docking probability of a whole path 3.10e-04 < threshold 0.001 (4 sites' paths)",
+            "planner",
+        ),
+        ("GAVE_UP", "the tool is inside the likely-obstacle region with no way out", "no_path"),
+        ("GAVE_UP", "no collision-free prefix to any promising docking site", "no_path"),
         ("GAVE_UP", "cycle budget of 8 spent", "budget"),
         ("GAVE_UP", "inference found no shape consistent with the contact history", "no_shape"),
         ("ABORTED", "sensor timeout", "aborted"),
@@ -32,19 +39,20 @@ def _episode(feasible, ended_by, cycles):
             "wall_s": 10.0, "perception_s": 0.01, **stages}  # fmt: skip
 
 
-def test_summary_separates_planner_give_ups_from_the_budget():
+def test_summary_separates_planner_give_ups_from_the_budget_and_stuck_planners():
     episodes = [
         _episode(True, "docked", 1),
         _episode(True, "aborted", 1),
         _episode(False, "planner", 3),
         _episode(False, "planner", 5),
         _episode(False, "budget", 8),
+        _episode(False, "no_path", 2),
     ]
     s = bench_episode.summary(episodes)
-    assert (s["episodes"], s["feasible"], s["docked_on_feasible"]) == (5, 2, 1)
+    assert (s["episodes"], s["feasible"], s["docked_on_feasible"]) == (6, 2, 1)
     assert s["infeasible_planner_give_up"] == 2 and s["infeasible_budget"] == 1
     assert s["infeasible_planner_give_up_cycles_median"] == 4.0
-    assert s["other"] == 1 and s["cycles_median"] == 3.0
+    assert s["other"] == 2 and s["cycles_median"] == 2.5
 
 
 @pytest.mark.parametrize("bad", [["--seeds", "0"], ["--problems", "boulder"]])

@@ -14,19 +14,20 @@ per second, clamped to the edge and stopped by any other edge on the way. Edges 
 in ``core.shape``: walking c -> d the solid is on the left, the outward normal on the right.
 The measured force is the environment's force on the tool, -K (s - p), zero in free space.
 
-Decision: when the commanded direction turns by more than 30 degrees (a new move, reversals
-included), the setpoint is re-anchored so that the force stays continuous (bumpless transfer, as
-an impedance controller switching its stiffness does); for an exact reversal K is unchanged and
-so is the setpoint. Steering within a move (the executor aims at the waypoint from where the
-tool is) keeps the old model. Without it a deflection built up across the motion under the weak
-lateral spring became a push along the stiff new direction at once: after a slide and the
-executor's retreat, 4 cm at 25 N/m (1.3 N) turned into 19 N in one step
-(``test_a_new_motion_direction_keeps_the_contact_force_continuous``). Until stop 27 a reversal
-kept the old model; a NEAR-reversal still turns the stiff axis (a retreat 16 degrees off the
-reverse of a move the tool slid along, then the release along the force): in the node suite the
-force jumped 3 -> 7 -> 15 N in two 5 ms steps with a 7 cm deflection, the executor's release
-stopped ("grew to ... N"), the tool stayed wedged and the planner gave up on a feasible
-three_ledges truth ("no way out").
+Decision: whenever the commanded direction changes, the setpoint is re-anchored so that the
+force stays continuous (bumpless transfer, as an impedance controller switching its stiffness
+does): the stiffness axes follow the command, the force does not jump with them. Without it a
+deflection built up across the motion under the weak lateral spring became a push along the
+stiff new direction at once: after a slide and the executor's retreat, 4 cm at 25 N/m (1.3 N)
+turned into 19 N in one step (``test_a_new_motion_direction_keeps_the_contact_force_continuous``).
+Until stop 27 only turns above 30 degrees re-anchored (not reversals, not steering within a
+move), but any turn of the stiff axis under a deflection jumps the force (4 cm: 1.3 N -> 5.9 N
+for a 20 degree steer): in the node suite the executor's retreat (16 degrees off the reverse of
+a move the tool had slid along) and its release along the measured force stopped at once with
+the force "grown" (3 -> 7 -> 15 N in two 5 ms steps), the tool stayed wedged against the face,
+and the planner gave up on feasible truths ("the tool is inside the likely-obstacle region with
+no way out": three_ledges seed 1, notch seed 4). An unchanged direction re-anchors to the same
+setpoint.
 """
 
 from __future__ import annotations
@@ -36,7 +37,6 @@ import numpy as np
 from tactile_dock_ros.core.geometry2d import cross, outward_normal
 
 _EPS = 1e-9  # slack on segment parameters, dimensionless
-REANCHOR_COS = np.cos(np.deg2rad(30.0))  # turns of the stiff axis above 30 degrees re-anchor
 
 
 class PointToolSim:
@@ -120,12 +120,10 @@ class PointToolSim:
         """Advance the setpoint by velocity (2,) m/s over dt seconds and resolve the tool."""
         velocity = np.asarray(velocity, float)
         speed = float(np.linalg.norm(velocity))
-        if speed > 0:
-            turn = float(velocity @ self.direction) / speed  # cos of the turn
+        if speed > 0 and not np.allclose(velocity / speed, self.direction, rtol=0.0, atol=1e-12):
             force = self.force
             self.direction = velocity / speed
-            if turn < REANCHOR_COS:  # a new move, not steering within one
-                self.setpoint = self.tool - np.linalg.solve(self.stiffness_matrix, force)
+            self.setpoint = self.tool - np.linalg.solve(self.stiffness_matrix, force)  # bumpless
         self.setpoint = self.setpoint + velocity * dt
         edges, hit = self._hits(self.tool, self.setpoint)
         self.contact_edge = int(edges[0]) if len(edges) else None

@@ -3,7 +3,8 @@
 Each episode brings up the five nodes of the mock launch file as processes (a fresh DDS
 domain) and runs one episode on a problem's ground truth of seed ``seed + k`` (k < ``--seeds``)
 for every problem of ``--problems``. Recorded: the final state and why (a GIVE_UP decision of
-the planner, the planner's cycle budget, or something else), the cycles, whether the truth is
+the planner on the docking probability, a GIVE_UP for want of a path (``no_path``, counted with
+the other endings), the planner's cycle budget, or something else), the cycles, whether the truth is
 feasible (``simulate.feasible``, with ideal compliance and without: the mock profile plans
 non-compliant, config/mock.yaml), the episode wall time and the perception / inference /
 planning / execution latencies, and where the nodes' logs are (``log_dir``): an episode
@@ -43,8 +44,14 @@ def add_arguments(parser) -> None:
 
 
 def ended_by(record) -> str:
-    """'docked', 'planner' (its GIVE_UP decision), 'budget' (``max_cycles`` spent), 'no_shape'
-    (inference found none) or the final state in lower case (aborted, none)."""
+    """'docked', 'planner' (its GIVE_UP decision: no docking probability above the threshold),
+    'no_path' (a GIVE_UP for want of a path: the tool stuck in the likely-obstacle region, no
+    collision-free prefix), 'budget' (``max_cycles`` spent), 'no_shape' (inference found none)
+    or the final state in lower case (aborted, none).
+
+    Decision: only the probability give-up judges the terrain infeasible (Sec. III-B); a
+    planner that finds no way to move gives up on feasible truths too (the node suite's
+    "no way out" after a wedged retreat), so it is counted apart, with the other endings."""
     message = record.detail
     if record.state == "DOCKED":
         return "docked"
@@ -52,7 +59,9 @@ def ended_by(record) -> str:
         return record.state.lower()
     if "cycle budget" in message:
         return "budget"
-    return "no_shape" if "no shape consistent" in message else "planner"
+    if "no shape consistent" in message:
+        return "no_shape"
+    return "planner" if "docking probability" in message else "no_path"
 
 
 def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
