@@ -25,8 +25,15 @@ def test_a_running_node_dumps_its_stacks_and_goes_on(tmp_path):
     with bringup.running({"profile": "mock"}, tmp_path, only={"inference"}) as processes:
         log = tmp_path / "inference.log"
         assert _wait_for(log, "HMC exit search ready"), log.read_text(errors="replace")
-        assert bringup.dump_stacks(processes, tmp_path) == ["inference"]
-        text = log.read_text(errors="replace")
+        # that line comes from the node's constructor: until the node spins a dump shows the
+        # constructor's frames, so ask again (each dump must come) until the spin loop shows
+        deadline = time.monotonic() + 60.0
+        while True:
+            assert bringup.dump_stacks(processes, tmp_path) == ["inference"]
+            text = log.read_text(errors="replace")
+            if "spin" in text or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
         assert bringup.STACK_MARKER in text and "spin" in text  # the executor's spin loop
         assert processes["inference"].poll() is None  # SIGUSR1's default would have ended it
         assert bringup.dump_stacks(processes, tmp_path) == ["inference"]  # again, at will
