@@ -21,6 +21,7 @@ from tactile_dock_ros.tools.episode import EpisodeRecord
         ),
         ("GAVE_UP", "the tool is inside the likely-obstacle region with no way out", "no_path"),
         ("GAVE_UP", "no collision-free prefix to any promising docking site", "no_path"),
+        ("GAVE_UP", "no edge of the shape faces the load direction", "planner"),
         ("GAVE_UP", "cycle budget of 8 spent", "budget"),
         ("GAVE_UP", "inference found no shape consistent with the contact history", "no_shape"),
         ("ABORTED", "sensor timeout", "aborted"),

@@ -43,14 +43,19 @@ def add_arguments(parser) -> None:
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per episode")
 
 
-def ended_by(record) -> str:
-    """'docked', 'planner' (its GIVE_UP decision: no docking probability above the threshold),
-    'no_path' (a GIVE_UP for want of a path: the tool stuck in the likely-obstacle region, no
-    collision-free prefix), 'budget' (``max_cycles`` spent), 'no_shape' (inference found none)
-    or the final state in lower case (aborted, none).
+# core.planner's give-ups for want of a path, not for want of a hold
+NO_PATH_REASONS = ("no way out", "no collision-free prefix")
 
-    Decision: only the probability give-up judges the terrain infeasible (Sec. III-B); a
-    planner that finds no way to move gives up on feasible truths too (the node suite's
+
+def ended_by(record) -> str:
+    """'docked', 'planner' (its GIVE_UP decision: no site worth trying, e.g. no docking
+    probability above the threshold), 'no_path' (a GIVE_UP for want of a path,
+    ``NO_PATH_REASONS``: the tool stuck in the likely-obstacle region, no collision-free
+    prefix), 'budget' (``max_cycles`` spent), 'no_shape' (inference found none) or the final
+    state in lower case (aborted, none).
+
+    Decision: only a give-up on the docking sites judges the terrain infeasible (Sec. III-B);
+    a planner that finds no way to move gives up on feasible truths too (the node suite's
     "no way out" after a wedged retreat), so it is counted apart, with the other endings."""
     message = record.detail
     if record.state == "DOCKED":
@@ -61,7 +66,7 @@ def ended_by(record) -> str:
         return "budget"
     if "no shape consistent" in message:
         return "no_shape"
-    return "planner" if "docking probability" in message else "no_path"
+    return "no_path" if any(reason in message for reason in NO_PATH_REASONS) else "planner"
 
 
 def _one(problem: str, seed: int, prior_source: str, timeout: float) -> dict:
