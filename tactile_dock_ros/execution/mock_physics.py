@@ -22,12 +22,12 @@ stiff new direction at once: after a slide and the executor's retreat, 4 cm at 2
 turned into 19 N in one step (``test_a_new_motion_direction_keeps_the_contact_force_continuous``).
 Until stop 27 only turns above 30 degrees re-anchored (not reversals, not steering within a
 move), but any turn of the stiff axis under a deflection jumps the force (4 cm: 1.3 N -> 5.9 N
-for a 20 degree steer): in the node suite the executor's retreat (16 degrees off the reverse of
-a move the tool had slid along) and its release along the measured force stopped at once with
-the force "grown" (3 -> 7 -> 15 N in two 5 ms steps), the tool stayed wedged against the face,
-and the planner gave up on feasible truths ("the tool is inside the likely-obstacle region with
-no way out": three_ledges seed 1, notch seed 4). An unchanged direction re-anchors to the same
-setpoint.
+for a 20 degree steer): in the node suite the executor's release along the measured force after
+a retreat (16 degrees off the reverse of a move the tool had slid along) stopped at once with
+the force "grown" (3 -> 7 -> 15 N in two 5 ms steps in the in-process replay of those plans),
+the tool stayed wedged against the face, and the planner gave up on feasible truths ("the tool
+is inside the likely-obstacle region with no way out": three_ledges seed 1, notch seed 4). An
+unchanged direction keeps the setpoint (re-anchoring would give the same one).
 """
 
 from __future__ import annotations
