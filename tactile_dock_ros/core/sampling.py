@@ -445,7 +445,7 @@ def _newton_directions(system, z: np.ndarray, viol: np.ndarray) -> np.ndarray:
     contact = np.zeros(viol.shape[1], dtype=bool)
     contact[system.contact_observations] = True
     chain, obs = np.nonzero(viol | contact[None])
-    prim, sign = system.steepest_primitive(z[chain], obs)
+    prim, sign = system.steepest_primitive(z, obs, chain)
     value = sign * system.values(z)[chain, prim]
     grad = sign[:, None] * system.gradient(z[chain], prim)
     target = np.where(viol[chain, obs], -(1.0 + NEWTON_MARGIN) * value, 0.0)
@@ -457,18 +457,23 @@ def _newton_directions(system, z: np.ndarray, viol: np.ndarray) -> np.ndarray:
 
 
 def random_descent(
-    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
+    system,
+    z: np.ndarray,
+    rng: np.random.Generator,
+    max_iters: int = 60,
+    enough: int | None = None,
+    newton: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
 
-    Decision: each even iteration picks a random violated observation and a random coordinate
-    axis of z, with probability proportional to the squared gradient of the observation's
-    active primitive along it (so local columns, e.g. one vertex's depth noise, fix local
-    contacts without disturbing the rest); each odd iteration steps along the Gauss-Newton
-    direction of all violated observations that keeps the satisfied contacts
-    (``_newton_directions``: fixes that need coordinates to move together). The state jumps
-    along that line to a point, drawn from the prior along the line, of a segment with the
-    fewest violated observations among the candidates of ``_descent_step``: the count never
+    Decision: each iteration picks a random violated observation and a random coordinate axis
+    of z, with probability proportional to the squared gradient of the observation's active
+    primitive along it (so local columns, e.g. one vertex's depth noise, fix local contacts
+    without disturbing the rest); with ``newton`` every odd iteration steps along the
+    Gauss-Newton direction of all violated observations that keeps the satisfied contacts
+    instead (``_newton_directions``: fixes that need coordinates to move together). The state
+    jumps along that line to a point, drawn from the prior along the line, of a segment with
+    the fewest violated observations among the candidates of ``_descent_step``: the count never
     increases. Stops when ``enough`` rows (default all) are feasible.
     """
     z = np.array(z, dtype=float)
@@ -481,7 +486,7 @@ def random_descent(
             break
         viol = system.violations(system.values(z[todo])) > 0
         pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
-        if step % 2:
+        if newton and step % 2:
             d = _newton_directions(system, z[todo], viol)
         else:
             prim, _ = system.steepest_primitive(z[todo], pick)
@@ -650,6 +655,13 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
        warm seeds count as typical) is discarded; descents restart until SEED_MIN_DISTINCT
        seeds (with the warm / exact ones) are kept, so that one pocket seed holds less than
        half of the chains and the check after the run can tell which chains are trapped.
+       The first restart descends by coordinate steps only (Sec. IV-D), the later ones also
+       by Gauss-Newton steps (``random_descent(newton=True)``). Measured (issue 12, depth
+       prior, ``bench docking --episode-seeds 3``): Newton steps from the first restart on
+       cut the slowest sloper cycle from 22 s to 3 s but changed the seeds of cycles that
+       coordinate steps seed well, and three_ledges truth 19 (infeasible) then gave up in 2
+       of 15 episodes instead of 9 of 15 (cause not established); so they only come in where
+       coordinate steps have failed once.
     Pocket chains that get past this are caught after the run (``convergence``) and re-seeded.
 
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
@@ -685,7 +697,7 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             start = np.vstack([start, shape.sample_z(rng, tries - len(start))])
         z0 = _contact_projection(shape, history, start)
         enough = tries if tries == chains - len(pool) else max(1, tries // 2)
-        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough, newton=attempt > 0)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
