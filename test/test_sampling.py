@@ -505,22 +505,6 @@ def test_split_rhat_and_trapped_chains_on_synthetic_draws():
     assert convergence.split_rhat(still)[0] == np.inf
 
 
-def test_descent_moves_coordinates_together_where_one_alone_cannot():
-    """z1 + z2 >= 4 with |z1 - z2| <= 0.01 from z = 0: a coordinate step that fixes the sum
-    breaks the band (and needs z1 >= 4, beyond DESCENT_HALF_WIDTH std), so coordinate steps
-    alone never reach the feasible set; the Gauss-Newton steps along the diagonal do."""
-    system = LinearConstraints(
-        np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0]]), np.array([4.0, -0.01, -0.01])
-    )
-    rng = np.random.default_rng(3)
-    z, count = sampling.random_descent(system, np.zeros((16, 2)), rng, 20)
-    assert np.all(count == 0)
-    assert np.all(sampling.feasible(system, z))
-    # the direction alone: least-norm, along the diagonal, aimed just inside the violated row
-    d = sampling._newton_directions(system, np.zeros((1, 2)), np.array([[True, False, False]]))
-    np.testing.assert_allclose(d[0], [2.2, 2.2])
-
-
 def test_atypical_descent_seeds_are_screened():
     """A seed far less likely under the prior than the typical one is dropped; on
     three_ledges descents do land in such places (|z|^2 ~250 against ~100)."""

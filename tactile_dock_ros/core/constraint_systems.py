@@ -134,23 +134,18 @@ class HistoryConstraints:
         contact = np.maximum(gmax, np.maximum(g5, g6))
         return np.where(self.structure.free_pair[pair, None], free_val, contact)
 
-    def steepest_primitive(
-        self, z: np.ndarray, obs: np.ndarray, chain: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """For each observation ``obs[i]`` at state ``z[chain[i]]`` (default: one observation
-        per state), the primitive k and sign s with f_obs(z) = s g_k(z) locally (the active
-        branch of the max/min structure); used as a descent direction. The primitives are
-        evaluated once per state however many of its observations are asked for."""
-        obs = np.asarray(obs)
-        chain = np.arange(len(z)) if chain is None else np.asarray(chain)
+    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each row, the primitive k and sign s with f_obs(z) = s g_k(z) locally (the
+        active branch of the max/min structure); used as a descent direction."""
         slots = self._slots(self.values(z))  # (C, P, 6)
-        pv = self.structure.pair_values(slots)[chain]  # (N, P)
-        in_obs = self.structure.pairs[:, 0][None] == obs[:, None]
+        pv = self.structure.pair_values(slots)  # (C, P)
+        in_obs = self.structure.pairs[:, 0][None] == np.asarray(obs)[:, None]
         free = self.structure.free_obs[obs]
         # free observations: the worst pair (max); contact: the best pair (min)
         key = np.where(in_obs, np.where(free[:, None], -pv, pv), np.inf)
         pair = np.argmin(key, axis=1)
-        g = slots[chain, pair]  # (N, 6)
+        rows = np.arange(len(z))
+        g = slots[rows, pair]  # (C, 6)
         g4 = g[:, :4]
         enter_branch = -g4.max(axis=1) >= g4.min(axis=1)  # all g <= 0: raise the largest
         slot = np.where(
@@ -261,7 +256,7 @@ class LinearConstraints:
             [z0 @ self.F.T + self.h, d @ self.F.T, np.zeros((len(z0), self.n_prims))], axis=-1
         )
 
-    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray, chain=None):
+    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(obs), np.ones(len(obs))
 
     def live_pairs(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:

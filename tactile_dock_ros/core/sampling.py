@@ -70,7 +70,6 @@ NODE_METHODS = tuple(name for name, s in SAMPLERS.items() if s.on_node)
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 DESCENT_HALF_WIDTH = 3.0  # descent line scans: +- this many std (a seed, not a Gibbs draw)
 DESCENT_CANDIDATES = 32  # segments per descent step judged against every observation
-NEWTON_MARGIN = 0.1  # Gauss-Newton descent steps aim this fraction of a violation inside
 SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
 SEED_MIN_DISTINCT = 3  # distinct seeds wanted (restart descents): one pocket holds < 1/2
 SEED_PRIOR_BATCH = 128  # prior draws tried as exact seeds before anything else
@@ -426,75 +425,35 @@ def _descent_step(system, z, pick, d, count_now, rng) -> np.ndarray:
     return z + np.where(found, t, 0.0)[:, None] * d
 
 
-def _newton_directions(system, z: np.ndarray, viol: np.ndarray) -> np.ndarray:
-    """(C, m) least-norm Gauss-Newton steps from states z (C, m) with violated observations
-    ``viol`` (C, n_obs): each violated observation's active primitive (``steepest_primitive``)
-    is moved to NEWTON_MARGIN of its violation on the inside, every satisfied contact
-    observation's keeps its value (to first order).
-
-    Decision (not in the paper): a coordinate step fixes one observation while holding the
-    other coordinates, so where the fix needs several coordinates to move together it is
-    rejected (the count would rise) however often it is tried. A slide past the end of what
-    the camera saw (sloper truth 5, depth prior: the last slip row on the occlusion bridge
-    below the seen slope) needs the bridge turned and the seen end moved along the slide's
-    earlier contacts: 64 coordinate descents of 60 steps left exactly that row violated, and
-    two cycles later no seed at all was found and a true observation was dropped as
-    inconsistent. The Gauss-Newton direction moves those coordinates together. One small
-    least-squares problem per chain (a handful of chains, tens of rows)."""
-    c, m = z.shape
-    contact = np.zeros(viol.shape[1], dtype=bool)
-    contact[system.contact_observations] = True
-    chain, obs = np.nonzero(viol | contact[None])
-    prim, sign = system.steepest_primitive(z, obs, chain)
-    value = sign * system.values(z)[chain, prim]
-    grad = sign[:, None] * system.gradient(z[chain], prim)
-    target = np.where(viol[chain, obs], -(1.0 + NEWTON_MARGIN) * value, 0.0)
-    out = np.zeros((c, m))
-    for i in np.unique(chain):
-        rows = chain == i
-        out[i] = np.linalg.lstsq(grad[rows], target[rows], rcond=None)[0]
-    return out
-
-
 def random_descent(
-    system,
-    z: np.ndarray,
-    rng: np.random.Generator,
-    max_iters: int = 60,
-    enough: int | None = None,
-    newton: bool = True,
+    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
 
     Decision: each iteration picks a random violated observation and a random coordinate axis
     of z, with probability proportional to the squared gradient of the observation's active
     primitive along it (so local columns, e.g. one vertex's depth noise, fix local contacts
-    without disturbing the rest); with ``newton`` every odd iteration steps along the
-    Gauss-Newton direction of all violated observations that keeps the satisfied contacts
-    instead (``_newton_directions``: fixes that need coordinates to move together). The state
-    jumps along that line to a point, drawn from the prior along the line, of a segment with
-    the fewest violated observations among the candidates of ``_descent_step``: the count never
-    increases. Stops when ``enough`` rows (default all) are feasible.
+    without disturbing the rest). The state jumps along that axis to a point, drawn from the
+    prior along the line, of a segment with the fewest violated observations among the
+    candidates of ``_descent_step``: the count never increases. Stops when ``enough`` rows
+    (default all) are feasible.
     """
     z = np.array(z, dtype=float)
     m = z.shape[1]
     count = _violated_count(system, z)
     enough = len(z) if enough is None else enough
-    for step in range(max_iters):
+    for _ in range(max_iters):
         todo = np.flatnonzero(count > 0)
         if len(z) - todo.size >= enough:
             break
         viol = system.violations(system.values(z[todo])) > 0
         pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
-        if newton and step % 2:
-            d = _newton_directions(system, z[todo], viol)
-        else:
-            prim, _ = system.steepest_primitive(z[todo], pick)
-            weight = system.gradient(z[todo], prim) ** 2 + 1e-12 / m
-            cum = np.cumsum(weight, axis=1)
-            axis = np.argmax(cum >= rng.random((todo.size, 1)) * cum[:, -1:], axis=1)
-            d = np.zeros((todo.size, m))
-            d[np.arange(todo.size), axis] = 1.0
+        prim, _ = system.steepest_primitive(z[todo], pick)
+        weight = system.gradient(z[todo], prim) ** 2 + 1e-12 / m
+        cum = np.cumsum(weight, axis=1)
+        axis = np.argmax(cum >= rng.random((todo.size, 1)) * cum[:, -1:], axis=1)
+        d = np.zeros((todo.size, m))
+        d[np.arange(todo.size), axis] = 1.0
         z[todo] = _descent_step(system, z[todo], pick, d, count[todo], rng)
         count[todo] = _violated_count(system, z[todo])
     return z, count
@@ -655,13 +614,6 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
        warm seeds count as typical) is discarded; descents restart until SEED_MIN_DISTINCT
        seeds (with the warm / exact ones) are kept, so that one pocket seed holds less than
        half of the chains and the check after the run can tell which chains are trapped.
-       The first restart descends by coordinate steps only (Sec. IV-D), the later ones also
-       by Gauss-Newton steps (``random_descent(newton=True)``). Measured (issue 12, depth
-       prior, ``bench docking --episode-seeds 3``): Newton steps from the first restart on
-       cut the slowest sloper cycle from 22 s to 3 s but changed the seeds of cycles that
-       coordinate steps seed well, and three_ledges truth 19 (infeasible) then gave up in 2
-       of 15 episodes instead of 9 of 15 (cause not established); so they only come in where
-       coordinate steps have failed once.
     Pocket chains that get past this are caught after the run (``convergence``) and re-seeded.
 
     Pairs a seed violates outside the pruned set are added to it and the descent repeated.
@@ -697,7 +649,7 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             start = np.vstack([start, shape.sample_z(rng, tries - len(start))])
         z0 = _contact_projection(shape, history, start)
         enough = tries if tries == chains - len(pool) else max(1, tries // 2)
-        z, count = random_descent(system, z0, rng, max_iters, enough=enough, newton=attempt > 0)
+        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
