@@ -364,6 +364,11 @@ def score(
     raise ValueError(f"unknown objective {objective!r}; choose from {OBJECTIVES}")
 
 
+# give-ups for want of a path, not for want of a hold (``bench episode`` counts them apart)
+NO_WAY_OUT = "the tool is inside the likely-obstacle region with no way out"
+NO_PREFIX = "no collision-free prefix to any promising docking site"
+
+
 def _give_up(rejected: int, reason: str, candidates: Candidates | None = None) -> Plan:
     return Plan(
         "give_up", np.zeros((0, 2)), 0.0, 0.0, -1, reason, np.full(2, np.nan), candidates, rejected
@@ -438,7 +443,7 @@ def plan(
         )
     lead = _lead(space, start, state, step)
     if lead is None:
-        return _give_up(rejected, "the tool is inside the likely-obstacle region with no way out")
+        return _give_up(rejected, NO_WAY_OUT)
     values = score(
         candidates, objective, state.targets, config.contact_resolution, config.give_up_threshold
     )
@@ -485,4 +490,4 @@ def plan(
             f"{config.give_up_threshold:g} ({len(unreachable)} sites' paths)",
             candidates,
         )
-    return _give_up(rejected, "no collision-free prefix to any promising docking site", candidates)
+    return _give_up(rejected, NO_PREFIX, candidates)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_dock_ros.core import problems, simulate
+from tactile_dock_ros.core import planner, problems, simulate
 from tactile_dock_ros.tools import bringup
 
 STAGES = ("wall_s", "perception_s", "inference_s", "planning_s", "execution_s")
@@ -43,8 +43,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per episode")
 
 
-# core.planner's give-ups for want of a path, not for want of a hold
-NO_PATH_REASONS = ("no way out", "no collision-free prefix")
+NO_PATH_REASONS = (planner.NO_WAY_OUT, planner.NO_PREFIX)  # give-ups for want of a path
 
 
 def ended_by(record) -> str:
@@ -132,13 +131,15 @@ def summary(episodes: list[dict]) -> dict:
         values = [v for v in values if v is not None]
         return float(np.median(values)) if values else None
 
-    planner = [e["cycles"] for e in infeasible if e["ended_by"] == "planner"]
+    given_up = [e["cycles"] for e in infeasible if e["ended_by"] == "planner"]
     return {
         "episodes": len(episodes),
         "feasible": sum(e["feasible"] for e in episodes),
         "docked_on_feasible": sum(e["feasible"] and e["state"] == "DOCKED" for e in episodes),
-        "infeasible_planner_give_up": len(planner),
-        "infeasible_planner_give_up_cycles_median": float(np.median(planner)) if planner else None,
+        "infeasible_planner_give_up": len(given_up),
+        "infeasible_planner_give_up_cycles_median": float(np.median(given_up))
+        if given_up
+        else None,
         "infeasible_budget": sum(e["ended_by"] == "budget" for e in infeasible),
         "other": sum(e["ended_by"] not in ("docked", "planner", "budget") for e in episodes),
         "cycles_median": float(np.median([e["cycles"] for e in episodes])),
