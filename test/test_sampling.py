@@ -8,12 +8,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tactile_dock_ros.core import convergence, explore, problems, sampling
+from tactile_dock_ros.core import convergence, problems, sampling
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
-from tactile_dock_ros.core.constraints import (
-    history_consistent,
-    prune_pairs,
-)
+from tactile_dock_ros.core.constraints import history_consistent, prune_pairs
 from tactile_dock_ros.core.ess import effective_sample_size
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.core.sampling import ChainRunner, sample_posterior
@@ -506,28 +503,6 @@ def test_split_rhat_and_trapped_chains_on_synthetic_draws():
     assert convergence.split_rhat(still)[0] == 1.0
     still[0] += 1.0
     assert convergence.split_rhat(still)[0] == np.inf
-
-
-def test_contact_projection_steps_are_bounded_and_still_reach_the_contacts():
-    """notch truth 9 of ``bench docking`` after its first move: 9 slip rows of a slide on a few
-    edges. Undamped Gauss-Newton steps cannot put one straight edge through several
-    non-collinear contacts and sent prior draws to |z|^2 of 4e3-1e5 (m = 35; the posterior's
-    rejection draws: 11-69), where no descent recovers. Each step is now capped at
-    DESCENT_HALF_WIDTH std."""
-    problem, index = problems.get("notch"), problems.names().index("notch")
-    truth = problem.sample_ground_truth(np.random.default_rng([0, index, 9]))
-    rng = np.random.default_rng([0, index, 9, 1])
-    history = explore.run_episode(problem, truth, "ours", rng, max_cycles=1).history
-    shape = problem.prior
-    assert history.is_contact.sum() >= 5
-    z0 = shape.sample_z(np.random.default_rng(0), 16)
-    z = sampling._contact_projection(shape, history, z0)
-    assert np.all(np.linalg.norm(z - z0, axis=1) <= 3 * sampling.DESCENT_HALF_WIDTH + 1e-9)
-
-    # and they still move toward the contacts: fewer violated rows than the draws had
-    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
-    count = sampling._violated_count
-    assert count(system, z).sum() < count(system, z0).sum()
 
 
 def test_atypical_descent_seeds_are_screened():

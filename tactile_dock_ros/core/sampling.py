@@ -472,11 +472,7 @@ def _contact_projection(
     Decision (the paper seeds descent from plain prior draws, which for thin contact slabs
     almost never reach the feasible set): each contact midpoint p gets the edge of the current
     shape its probe line crosses nearest to p, and Gauss-Newton minimum-norm steps solve
-    cross(d - c, p - c) = 0 (g1 of eq. 7 with a = p) for all of them at once. Each step is
-    capped at DESCENT_HALF_WIDTH std (issue 12): several non-collinear contacts on one
-    edge have no exact solution, and the undamped steps then ran off to |z|^2 of 4e3-1e5
-    (notch, problem prior, m = 35, after a slide's 9 slip rows; its posterior draws have
-    11-69), far beyond where any descent or chain recovers.
+    cross(d - c, p - c) = 0 (g1 of eq. 7 with a = p) for all of them at once.
     """
     contact = np.flatnonzero(history.is_contact)
     if contact.size == 0:
@@ -506,8 +502,7 @@ def _contact_projection(
         for _ in range(iters):
             g = system.values(z[c][None])[0, prims]
             jac = system.gradient(np.repeat(z[c][None], len(prims), 0), prims)
-            step = np.linalg.lstsq(jac, g, rcond=None)[0]
-            z[c] -= step * min(1.0, DESCENT_HALF_WIDTH / max(np.linalg.norm(step), 1e-300))
+            z[c] -= np.linalg.lstsq(jac, g, rcond=None)[0]
     return z
 
 
