@@ -80,12 +80,14 @@ def test_infeasible_sloper_on_the_depth_prior_gives_up_without_compliance():
 def test_a_slide_down_a_smooth_slope_is_evidence_on_every_few_centimetres(monkeypatch):
     # benchmark truth 1, compliant, 0.24 degrees too steep: each slide down its 24 cm slope was
     # one trace piece, 3 slip rows over the depth prior's 12 edges there; the other edges kept
-    # their chance to hold and P_dock stayed at 0.7-0.9 to the cap. A row every 4 cm gives up.
+    # their chance to hold and P_dock stayed at 0.7-0.9 to the cap. A row every 4 cm gives up
+    # within the mock profile's 8 cycles (within 6 on stop 27's machine, after 7 on stop 29's: the
+    # episode's floating point differs between CPUs, README "One seed per truth ...").
     problem, truth, prior, seed = _infeasible_bench_truth("sloper", 1, compliant=True)
 
     def episode():
         rng = np.random.default_rng(seed)
-        return explore.run_episode(problem, truth, "ours", rng, 6, prior=prior)
+        return explore.run_episode(problem, truth, "ours", rng, 8, prior=prior)
 
     result = episode()
     assert result.outcome == "gave_up", result.message
