@@ -1,6 +1,7 @@
 """The docking benchmark runs end to end on tiny configurations and writes its JSON."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -225,15 +226,22 @@ def test_sigterm_stops_a_background_run_and_writes_what_finished(tmp_path, worke
         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),  # as `cmd &` in a script
     )
+    before = []
     for line in process.stderr:  # the first finished episode
+        before.append(line)
         if line.startswith("[1/"):
             break
+    # what the child looked like at the kill: the facts an open bug needs (see the xfail reason)
+    alive = process.poll() is None
+    status = Path(f"/proc/{process.pid}/status")
+    masks = [s for s in status.read_text().splitlines() if s.startswith("Sig")] if alive else []
     process.send_signal(signal.SIGTERM)
-    process.stderr.read()
+    after = process.stderr.read().splitlines()
     assert process.wait(timeout=120) == 0
     report = json.loads(out.read_text())
     total = 3 * 2 * 3 * 4  # truths x modes x strategies x episode seeds
-    assert 0 < report["unfinished_episodes"] < total
+    seen = f"alive at kill: {alive}, {masks}, stderr before: {before[-3:]}, after: {after[:3]}"
+    assert 0 < report["unfinished_episodes"] < total, seen
     assert (
         sum(len(r["episodes"]) for r in report["results"]) == total - report["unfinished_episodes"]
     )

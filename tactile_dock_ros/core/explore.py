@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +45,17 @@ class CycleLog:
     rejected: int  # posterior samples on which a recorded slide could not have happened
     history_length: int  # observations available when this cycle planned
     convergence: Convergence  # the sampler's between-chain check of this cycle's samples
+
+
+@dataclass(frozen=True)
+class CycleView:
+    """What one cycle planned on: the planner's exact inputs and its decision."""
+
+    cycle: int
+    state: EpisodeState  # its history, slides' move ids, dropped rows, tool, targets
+    config: PlannerConfig  # with this cycle's objective
+    plan: planner.Plan
+    samples: np.ndarray  # (N, n, 2) all posterior samples of the cycle
 
 
 @dataclass(frozen=True)
@@ -80,6 +92,7 @@ def run_episode(
     compliant: bool = True,
     keep_samples: int = 20,
     prior: GaussianShape | None = None,
+    observe: Callable[[CycleView], None] | None = None,
 ) -> EpisodeResult:
     """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
 
@@ -91,6 +104,9 @@ def run_episode(
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
+    ``observe`` (diagnostic tools, e.g. ``tools.bench.posterior``) is called with a
+    ``CycleView`` after each plan, before the move; an exception it raises ends the episode
+    as an error like any other.
     Raises ValueError on a bad strategy, ``max_cycles`` or planner setting (``PlannerConfig``).
     """
     if strategy not in STRATEGIES:
@@ -121,10 +137,11 @@ def run_episode(
                 return _finish(state, log, "error", f"inference returned {len(post.z)} samples")
             state = state.sampled(post.z, post.dropped)
             objective = _objective(strategy, cycle)
-            decision = planner.plan(
-                post.vertices, prior, state, dataclasses.replace(config, objective=objective)
-            )
+            config = dataclasses.replace(config, objective=objective)
+            decision = planner.plan(post.vertices, prior, state, config)
             t2 = time.perf_counter()
+            if observe is not None:
+                observe(CycleView(cycle, state, config, decision, post.vertices))
             entry = dict(
                 cycle=cycle,
                 plan=decision,

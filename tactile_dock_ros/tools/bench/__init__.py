@@ -31,6 +31,7 @@ SUITES = {
     "episode": "mock-profile episodes over DDS per problem: outcomes (give-up vs budget), latency",
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
+    "posterior": "an episode's HMC posterior per cycle vs an SMC reference: means, P_dock, give-up",
     "prior": "depth prior calibration: 2-sigma coverage, NLL, energy score, old vs new model",
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "safety": "executor under faults over DDS: sensor dropout latency, envelope, load jitter",

@@ -1,0 +1,238 @@
+"""The episode's posterior against a reference: HMC samples of each cycle of one docking
+episode beside an SMC reference posterior of the same history (``core.reference``: tempered
+SMC with elliptical slice moves, nothing shared with the HMC seeding), ``--references``
+independent runs pooled.
+
+Per cycle: the largest and median standardized error of the HMC vertex means (in reference
+standard deviations; beside it the same statistic for as many pooled reference draws, the
+noise floor of independent draws, and the largest one between the SMC runs' means, the
+reference's own noise), the share of samples a recorded slide leaves (``slides``), how
+often the cycle's plan docks on the HMC samples and on the reference ones, and what the planner
+decides on sample sets of the same size drawn from the reference (give-ups, P_dock): whether
+the episode continues or gives up because of the posterior or because of the sampler.
+
+    python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance 19 \\
+        --prior depth --cycles 3 7 11 --json out.json
+
+A late depth-prior cycle takes minutes per 1000 particles (the constraint evaluations of the
+elliptical slice moves); ``--quick`` runs 2 cycles with 200 particles.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tactile_dock_ros.core import explore, planner, problems, reference, simulate, slides
+from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.tools.bench.docking import (
+    MODES,
+    PERCEPTION_CONFIG,
+    PRIORS,
+    _at_least,
+    _probability,
+    _problem,
+    _truths,
+    episode_seed,
+    mock_give_up_threshold,
+)
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--problem", default="three_ledges", choices=problems.names())
+    parser.add_argument(
+        "--instance", type=_at_least(0), default=19, help="truth index, as in bench docking"
+    )
+    parser.add_argument("--prior", default="depth", choices=PRIORS)
+    parser.add_argument("--mode", default="compliant", choices=MODES)
+    parser.add_argument("--strategy", default="ours", choices=explore.STRATEGIES)
+    parser.add_argument(
+        "--episode-seed", type=_at_least(0), default=0, help="as bench docking's --episode-seeds"
+    )
+    parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
+    parser.add_argument("--samples", type=_at_least(2), default=100, help="posterior samples")
+    parser.add_argument(
+        "--cycles", type=int, nargs="+", help="cycles to check, from 0 (default: all)"
+    )
+    parser.add_argument(
+        "--particles", type=_at_least(100), default=1000, help="SMC particles per cycle"
+    )
+    parser.add_argument(
+        "--references",
+        type=_at_least(2),
+        default=2,
+        help="independent SMC runs per cycle, pooled (their spread is the reference's own noise)",
+    )
+    parser.add_argument(
+        "--perception-config",
+        type=Path,
+        default=PERCEPTION_CONFIG,
+        help="as bench docking (depth prior)",
+    )
+    parser.add_argument("--give-up-threshold", type=_probability, default=mock_give_up_threshold())
+    parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
+
+
+def _mean_errors(samples: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """|mean(samples) - mean(ref)| per vertex coordinate, in reference standard deviations."""
+    x, r = samples.reshape(len(samples), -1), ref.reshape(len(ref), -1)
+    spread = r.std(axis=0)
+    moving = spread > 0
+    return np.abs(x.mean(axis=0) - r.mean(axis=0))[moving] / spread[moving]
+
+
+def _dock_share(view: explore.CycleView, shape, samples: np.ndarray) -> tuple[float, float | None]:
+    """(share of samples a recorded slide leaves, share of those on which the plan docks; None
+    for a give-up or when no sample is left)."""
+    state, config = view.state, view.config
+    keep = slides.consistent_with_slides(
+        samples, shape.closed, state.history, state.move_ids, config.load, shape.friction,
+        state.dropped,
+    )  # fmt: skip
+    if view.plan.decision != "dock" or not keep.any():  # a give-up has no path
+        return float(keep.mean()), None
+    docks = simulate.dock_outcomes(
+        samples[keep], shape.closed, view.plan.path, shape.friction, config.load, config.compliant
+    )
+    return float(keep.mean()), float(docks.mean())
+
+
+def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> dict:
+    """One cycle: its HMC samples against ``runs`` SMC references of the same (kept) history,
+    pooled; how far the runs' means lie apart says how far the reference itself can be
+    trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.6 std in a
+    vertex mean: far more than independent draws would)."""
+    state = view.state
+    kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
+    start = time.perf_counter()
+    history = state.history.subset(kept)
+    refs = [reference.smc_posterior(shape, history, particles, rng) for _ in range(runs)]
+    seconds = time.perf_counter() - start
+    each = [shape.vertices(r.z) for r in refs]
+    ref_v = np.concatenate(each)
+    n = len(view.samples)
+    floor = _mean_errors(ref_v[:n], ref_v[n:])
+    apart = max(
+        float(_mean_errors(each[i], each[j]).max()) for i in range(runs) for j in range(i + 1, runs)
+    )
+    errors = _mean_errors(view.samples, ref_v)
+    hmc_kept, hmc_docks = _dock_share(view, shape, view.samples)
+    ref_kept, ref_docks = _dock_share(view, shape, ref_v)
+    decisions = [
+        planner.plan(ref_v[k : k + n], shape, state, view.config)
+        for k in range(0, len(ref_v) - n + 1, n)
+    ]
+    return {
+        "cycle": view.cycle,
+        "history_rows": len(kept),
+        "dropped_rows": len(state.dropped),
+        "smc_seconds": seconds,
+        "smc_stages": [r.stages for r in refs],
+        "log_evidence": [r.log_evidence for r in refs],
+        "mean_error_max": float(errors.max()),
+        "mean_error_median": float(np.median(errors)),
+        "iid_mean_error_max": float(floor.max()),
+        "reference_runs_mean_error_max": apart,
+        "slide_consistent": {
+            "hmc": hmc_kept,
+            "reference": ref_kept,
+            "reference_runs": [_dock_share(view, shape, v)[0] for v in each],
+        },
+        "plan": view.plan.decision,
+        "plan_p_dock": view.plan.p_dock,
+        "plan_docks_on": {"hmc": hmc_docks, "reference": ref_docks},
+        "reference_plans": {
+            "give_up": sum(d.decision == "give_up" for d in decisions),
+            "of": len(decisions),
+            "p_dock_median": float(np.median([d.p_dock for d in decisions])),
+        },
+    }
+
+
+HEADER = (
+    f"{'cycle':>5} {'rows':>4} {'smc s':>6} {'logP(H)':>7} {'err max':>7} {'iid':>5} "
+    f"{'runs':>5} {'med':>5} {'slide-ok hmc/ref':>16} {'plan P_dock':>11} {'docks hmc/ref':>13} "
+    f"{'ref plans: give-ups, med P_dock':>31}"
+)
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
+def _line(row: dict) -> str:
+    ok, docks, plans = row["slide_consistent"], row["plan_docks_on"], row["reference_plans"]
+    return (
+        f"{row['cycle']:>5} {row['history_rows']:>4} {row['smc_seconds']:>6.0f} "
+        f"{np.mean(row['log_evidence']):>7.1f} {row['mean_error_max']:>7.2f} "
+        f"{row['iid_mean_error_max']:>5.2f} {row['reference_runs_mean_error_max']:>5.2f} "
+        f"{row['mean_error_median']:>5.2f} "
+        f"{ok['hmc']:>7.2f}/{ok['reference']:<8.2f} {row['plan_p_dock']:>11.3f} "
+        f"{_share(docks['hmc']):>6}/{_share(docks['reference']):<6} "
+        f"{plans['give_up']:>14}/{plans['of']:<3} {plans['p_dock_median']:>12.3f}"
+    )
+
+
+def run(args) -> dict:
+    max_cycles, particles = (2, 200) if args.quick else (args.max_cycles, args.particles)
+    if args.references * particles < 2 * args.samples:
+        raise SystemExit(
+            f"--references x --particles ({args.references} x {particles}) must be at least "
+            f"2 x --samples ({args.samples}): the noise floor compares that many draws"
+        )
+    config = PerceptionConfig.load(args.perception_config) if args.prior == "depth" else None
+    truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
+    problem = _problem(args.problem)
+    shape = problem.prior if args.prior == "problem" else truth["depth"]
+    if shape is None:
+        raise SystemExit(f"no depth prior for this truth: {truth['perception_error']}")
+    views: list[explore.CycleView] = []
+    result = explore.run_episode(
+        problem,
+        truth["truth"],
+        args.strategy,
+        np.random.default_rng(episode_seed(truth["seed"], args.episode_seed)),
+        max_cycles,
+        n_samples=args.samples,
+        give_up_threshold=args.give_up_threshold,
+        compliant=args.mode == "compliant",
+        prior=shape,
+        observe=views.append,
+    )
+    p_dock = [round(c.plan.p_dock, 3) for c in result.cycles_log]
+    print(f"episode: {result.outcome} after {result.cycles} moves, P_dock per cycle {p_dock}")
+    wanted = range(len(views)) if args.cycles is None else args.cycles
+    if args.quick:
+        wanted = list(wanted)[:2]
+    unknown = sorted(set(wanted) - set(range(len(views))))
+    if unknown:
+        raise SystemExit(f"cycles {unknown} not in this episode (0..{len(views) - 1})")
+    print(HEADER)
+    rows = []
+    for cycle in wanted:
+        rows_now = len(views[cycle].state.history)
+        print(
+            f"  cycle {cycle}: {args.references} SMC runs of {particles} particles, "
+            f"{rows_now} rows ...",
+            flush=True,
+        )
+        rng = np.random.default_rng([args.seed, cycle, 7])
+        rows.append(compare(views[cycle], shape, particles, args.references, rng))
+        print(_line(rows[-1]), flush=True)
+    return {
+        "problem": args.problem,
+        "instance": args.instance,
+        "prior": args.prior,
+        "mode": args.mode,
+        "strategy": args.strategy,
+        "feasible": truth["feasible"][args.mode],
+        "outcome": result.outcome,
+        "p_dock": [c.plan.p_dock for c in result.cycles_log],
+        "rhat": [c.convergence.rhat for c in result.cycles_log],
+        "particles": particles,
+        "references": args.references,
+        "samples": args.samples,
+        "cycles": rows,
+    }

@@ -1,0 +1,40 @@
+"""bench posterior: an episode's HMC posteriors beside SMC references, end to end."""
+
+import json
+
+import pytest
+
+from tactile_dock_ros.tools import bench
+
+
+def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_path):
+    """Sloper truth 1 on the problem prior plans a dock in its second cycle and gives up in
+    its third: both are compared with an SMC reference of their history."""
+    out = tmp_path / "posterior.json"
+    argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
+    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--json", str(out)]
+    assert bench.main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["outcome"] == "gave_up" and report["particles"] == 200
+    dock, give_up = report["cycles"]
+    assert dock["history_rows"] > 0 and min(dock["smc_stages"]) >= 2
+    assert dock["plan"] == "dock" and 0 <= dock["plan_docks_on"]["reference"] <= 1
+    assert give_up["plan"] == "give_up" and give_up["plan_p_dock"] == 0.0
+    assert give_up["plan_docks_on"] == {"hmc": None, "reference": None}  # no path to score
+    for row in report["cycles"]:
+        # the sampler's posterior is the reference's, to within the noise of 100 draws
+        assert row["mean_error_max"] < 3 * row["iid_mean_error_max"]
+        assert row["reference_plans"]["of"] == 4  # 2 runs x 200 draws in sets of 100
+        assert 0 < row["reference_runs_mean_error_max"] < 1
+        assert len(row["slide_consistent"]["reference_runs"]) == 2
+        assert row["plan_p_dock"] == pytest.approx(report["p_dock"][row["cycle"]])
+
+
+def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
+    argv = ["posterior", "--problem", "sloper", "--prior", "problem", "--max-cycles", "1"]
+    with pytest.raises(SystemExit, match=r"cycles \[5\] not in this episode"):
+        bench.main([*argv, "--cycles", "5", "--particles", "100"])
+    with pytest.raises(SystemExit, match="at least 2 x --samples"):
+        bench.main([*argv, "--particles", "100", "--samples", "200"])
+    with pytest.raises(SystemExit):  # argparse: one run has no spread to measure
+        bench.main([*argv, "--references", "1"])
