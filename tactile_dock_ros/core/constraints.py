@@ -172,13 +172,18 @@ def _edges(n: int, closed: bool) -> np.ndarray:
 
 
 def observation_violations(
-    shape_closed: bool, vertices: np.ndarray, history: History, friction: float
+    shape_closed: bool,
+    vertices: np.ndarray,
+    history: History,
+    friction: float,
+    primitives: tuple[np.ndarray, ...] | None = None,
 ) -> np.ndarray:
     """Exact per-observation values f_{s,a,b} (N, k) for vertex sets (N, n, 2); <= 0 = satisfied.
 
     Batch bounding-volume check (Sec. IV-F): a pair whose segment box misses the box of the edge
     over the whole batch is never evaluated (it cannot touch, so its free value is -inf and it
-    cannot serve a contact).
+    cannot serve a contact). ``primitives``: ``observation_primitives(history, friction)``,
+    for callers that evaluate one history many times (computed here when None).
     """
     v = _check_vertices(vertices)
     edges = _edges(v.shape[1], shape_closed)
@@ -194,7 +199,9 @@ def observation_violations(
         (seg_lo[:, None] <= edge_hi[None]) & (edge_lo[None] <= seg_hi[:, None]), axis=-1
     )
     pairs = np.argwhere(overlap)
-    sign, lin, const, active = observation_primitives(history, friction)
+    if primitives is None:
+        primitives = observation_primitives(history, friction)
+    sign, lin, const, active = primitives
     structure = PairStructure(history.status, pairs)
     obs = structure.pairs[:, 0]
     y = ends[:, structure.pairs[:, 1]].reshape(len(v), len(obs), 4)

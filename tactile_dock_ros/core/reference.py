@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constraints import observation_violations
+from .constraints import observation_primitives, observation_violations
 from .history import History
 from .shape import GaussianShape
 
@@ -49,13 +49,18 @@ class ReferencePosterior:
     unique_fraction: float  # distinct particles after the last resampling, before its moves
 
 
-def total_violation(shape: GaussianShape, history: History, z: np.ndarray) -> np.ndarray:
-    """V(z) (N,): the summed positive parts of the observation values f_j (0 = consistent)."""
-    values = observation_violations(shape.closed, shape.vertices(z), history, shape.friction)
+def total_violation(
+    shape: GaussianShape, history: History, z: np.ndarray, primitives=None
+) -> np.ndarray:
+    """V(z) (N,): the summed positive parts of the observation values f_j (0 = consistent);
+    ``primitives`` as ``constraints.observation_violations`` takes them."""
+    values = observation_violations(
+        shape.closed, shape.vertices(z), history, shape.friction, primitives
+    )
     return np.sum(np.maximum(values, 0.0), axis=1)
 
 
-def _slice_moves(shape, history, z, violation, lam, moves, rng):
+def _slice_moves(shape, history, primitives, z, violation, lam, moves, rng):
     """``moves`` elliptical slice moves of every particle under exp(-lam V) (lam = inf: the
     indicator); returns the moved z and their V."""
     n, m = z.shape
@@ -68,7 +73,7 @@ def _slice_moves(shape, history, z, violation, lam, moves, rng):
         for _ in range(SHRINK_LIMIT):
             c, s = np.cos(theta[todo])[:, None], np.sin(theta[todo])[:, None]
             proposal = z[todo] * c + nu[todo] * s
-            v = total_violation(shape, history, proposal)
+            v = total_violation(shape, history, proposal, primitives)
             ok = v <= 0.0 if level is None else -lam * v > level[todo]
             z[todo[ok]], violation[todo[ok]] = proposal[ok], v[ok]
             todo, th = todo[~ok], theta[todo[~ok]]
@@ -128,8 +133,9 @@ def smc_posterior(
         raise ValueError(f"ess_fraction must lie in (0, 1), got {ess_fraction}")
     if shape.n_basis == 0:
         raise ValueError("the shape has no basis columns: nothing to sample")
+    primitives = observation_primitives(history, shape.friction)
     z = shape.sample_z(rng, n_particles)
-    violation = total_violation(shape, history, z)
+    violation = total_violation(shape, history, z, primitives)
     lam, log_evidence, total_moves, unique = 0.0, 0.0, 0, 1.0
     for stage in range(1, max_stages + 1):
         new = _next_lambda(violation, lam, ess_fraction)
@@ -143,7 +149,7 @@ def smc_posterior(
         unique = len(np.unique(pick)) / n_particles
         z, violation, lam = z[pick], violation[pick], new
         count = moves if np.isfinite(lam) else final_moves
-        z, violation = _slice_moves(shape, history, z, violation, lam, count, rng)
+        z, violation = _slice_moves(shape, history, primitives, z, violation, lam, count, rng)
         total_moves += count
         LOG.info("smc stage %d: lambda %.3g, %.0f%% distinct", stage, lam, 100 * unique)
         if not np.isfinite(lam):
