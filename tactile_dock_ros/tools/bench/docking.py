@@ -80,6 +80,23 @@ def _at_least(minimum: int):
     return parse
 
 
+def add_episode_arguments(parser) -> None:
+    """The episode settings this suite shares with ``bench posterior``."""
+    parser.add_argument(
+        "--perception-config",
+        type=Path,
+        default=PERCEPTION_CONFIG,
+        help="camera extrinsic + covariance, depth noise (depth prior)",
+    )
+    parser.add_argument(
+        "--give-up-threshold",
+        type=_probability,
+        default=mock_give_up_threshold(),
+        help="the planner gives up below this best P_dock (default: the mock profile's; "
+        "the paper's experiments: 0.001)",
+    )
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--instances", type=_at_least(1), default=20, help="truths per problem")
     parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
@@ -102,19 +119,7 @@ def add_arguments(parser) -> None:
         choices=MODES,
         help="compliant: ideal compliance; non-compliant: the mock profile's",
     )
-    parser.add_argument(
-        "--perception-config",
-        type=Path,
-        default=PERCEPTION_CONFIG,
-        help="camera extrinsic + covariance, depth noise (depth prior)",
-    )
-    parser.add_argument(
-        "--give-up-threshold",
-        type=_probability,
-        default=mock_give_up_threshold(),
-        help="the planner gives up below this best P_dock (default: the mock profile's; "
-        "the paper's experiments: 0.001)",
-    )
+    add_episode_arguments(parser)
     parser.add_argument(
         "--episode-seeds",
         type=_at_least(1),

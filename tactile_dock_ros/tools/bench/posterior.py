@@ -20,7 +20,6 @@ cycle on three_ledges (37-115 rows; the constraint evaluations of the elliptical
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -28,14 +27,12 @@ from tactile_dock_ros.core import explore, planner, problems, reference, simulat
 from tactile_dock_ros.perception.config import PerceptionConfig
 from tactile_dock_ros.tools.bench.docking import (
     MODES,
-    PERCEPTION_CONFIG,
     PRIORS,
     _at_least,
-    _probability,
     _problem,
     _truths,
+    add_episode_arguments,
     episode_seed,
-    mock_give_up_threshold,
 )
 
 
@@ -67,18 +64,7 @@ def add_arguments(parser) -> None:
         default=2,
         help="independent SMC runs per cycle, pooled (their spread is the reference's own noise)",
     )
-    parser.add_argument(
-        "--perception-config",
-        type=Path,
-        default=PERCEPTION_CONFIG,
-        help="as bench docking (depth prior)",
-    )
-    parser.add_argument(
-        "--give-up-threshold",
-        type=_probability,
-        default=mock_give_up_threshold(),
-        help="as bench docking (default: the mock profile's)",
-    )
+    add_episode_arguments(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
 
 
