@@ -45,8 +45,6 @@ class ReferencePosterior:
     z: np.ndarray
     log_evidence: float  # log P(H) under the prior (the SMC estimate)
     stages: int  # tempering stages, the indicator stage included
-    moves: int  # elliptical slice moves per particle, all stages
-    unique_fraction: float  # distinct particles after the last resampling, before its moves
 
 
 def total_violation(
@@ -136,7 +134,7 @@ def smc_posterior(
     primitives = observation_primitives(history, shape.friction)
     z = shape.sample_z(rng, n_particles)
     violation = total_violation(shape, history, z, primitives)
-    lam, log_evidence, total_moves, unique = 0.0, 0.0, 0, 1.0
+    lam, log_evidence = 0.0, 0.0
     for stage in range(1, max_stages + 1):
         new = _next_lambda(violation, lam, ess_fraction)
         if np.isfinite(new):
@@ -146,12 +144,11 @@ def smc_posterior(
         log_evidence += _log_mean_exp(log_w)
         w = np.exp(log_w - log_w.max())
         pick = rng.choice(n_particles, size=n_particles, p=w / w.sum())
-        unique = len(np.unique(pick)) / n_particles
+        distinct = len(np.unique(pick)) / n_particles
         z, violation, lam = z[pick], violation[pick], new
         count = moves if np.isfinite(lam) else final_moves
         z, violation = _slice_moves(shape, history, primitives, z, violation, lam, count, rng)
-        total_moves += count
-        LOG.info("smc stage %d: lambda %.3g, %.0f%% distinct", stage, lam, 100 * unique)
+        LOG.info("smc stage %d: lambda %.3g, %.0f%% distinct", stage, lam, 100 * distinct)
         if not np.isfinite(lam):
-            return ReferencePosterior(z, log_evidence, stage, total_moves, unique)
+            return ReferencePosterior(z, log_evidence, stage)
     raise RuntimeError(f"SMC did not reach the history's constraint set in {max_stages} stages")

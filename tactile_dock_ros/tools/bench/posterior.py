@@ -76,20 +76,25 @@ def _mean_errors(samples: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return np.abs(x.mean(axis=0) - r.mean(axis=0))[moving] / spread[moving]
 
 
-def _dock_share(view: explore.CycleView, shape, samples: np.ndarray) -> tuple[float, float | None]:
-    """(share of samples a recorded slide leaves, share of those on which the plan docks; None
-    for a give-up or when no sample is left)."""
+def _slide_consistent(view: explore.CycleView, shape, samples: np.ndarray) -> np.ndarray:
+    """Mask of the samples on which the cycle's recorded slides could have happened."""
     state, config = view.state, view.config
-    keep = slides.consistent_with_slides(
+    return slides.consistent_with_slides(
         samples, shape.closed, state.history, state.move_ids, config.load, shape.friction,
         state.dropped,
     )  # fmt: skip
-    if view.plan.decision != "dock" or not keep.any():  # a give-up has no path
-        return float(keep.mean()), None
+
+
+def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | None:
+    """Share of ``samples`` on which the cycle's plan docks; None for a give-up (no path) or
+    when no sample is left."""
+    if view.plan.decision != "dock" or not len(samples):
+        return None
+    config = view.config
     docks = simulate.dock_outcomes(
-        samples[keep], shape.closed, view.plan.path, shape.friction, config.load, config.compliant
+        samples, shape.closed, view.plan.path, shape.friction, config.load, config.compliant
     )
-    return float(keep.mean()), float(docks.mean())
+    return float(docks.mean())
 
 
 def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> dict:
@@ -111,8 +116,9 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> d
         float(_mean_errors(each[i], each[j]).max()) for i in range(runs) for j in range(i + 1, runs)
     )
     errors = _mean_errors(view.samples, ref_v)
-    hmc_kept, hmc_docks = _dock_share(view, shape, view.samples)
-    ref_kept, ref_docks = _dock_share(view, shape, ref_v)
+    hmc_keep = _slide_consistent(view, shape, view.samples)
+    run_keeps = [_slide_consistent(view, shape, v) for v in each]
+    ref_keep = np.concatenate(run_keeps)
     decisions = [
         planner.plan(ref_v[k : k + n], shape, state, view.config)
         for k in range(0, len(ref_v) - n + 1, n)
@@ -129,13 +135,16 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> d
         "iid_mean_error_max": float(floor.max()),
         "reference_runs_mean_error_max": apart,
         "slide_consistent": {
-            "hmc": hmc_kept,
-            "reference": ref_kept,
-            "reference_runs": [_dock_share(view, shape, v)[0] for v in each],
+            "hmc": float(hmc_keep.mean()),
+            "reference": float(ref_keep.mean()),
+            "reference_runs": [float(k.mean()) for k in run_keeps],
         },
         "plan": view.plan.decision,
         "plan_p_dock": view.plan.p_dock,
-        "plan_docks_on": {"hmc": hmc_docks, "reference": ref_docks},
+        "plan_docks_on": {
+            "hmc": _plan_docks(view, shape, view.samples[hmc_keep]),
+            "reference": _plan_docks(view, shape, ref_v[ref_keep]),
+        },
         "reference_plans": {
             "give_up": sum(d.decision == "give_up" for d in decisions),
             "of": len(decisions),
