@@ -100,7 +100,7 @@ def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | 
 def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> dict:
     """One cycle: its HMC samples against ``runs`` SMC references of the same (kept) history,
     pooled; how far the runs' means lie apart says how far the reference itself can be
-    trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.6 std in a
+    trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.7 std in a
     vertex mean: far more than independent draws would)."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
