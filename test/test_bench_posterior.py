@@ -12,7 +12,8 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
     its third: both are compared with an SMC reference of their history."""
     out = tmp_path / "posterior.json"
     argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
-    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--json", str(out)]
+    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--hmc-runs", "3"]
+    argv += ["--json", str(out)]
     assert bench.main(argv) == 0
     report = json.loads(out.read_text())
     assert report["outcome"] == "gave_up" and report["particles"] == 200
@@ -28,6 +29,13 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
         assert 0 < row["reference_runs_mean_error_max"] < 1
         assert len(row["slide_consistent"]["reference_runs"]) == 2
         assert row["plan_p_dock"] == pytest.approx(report["p_dock"][row["cycle"]])
+        # three more sampler runs of the same history: each agrees with the reference, and
+        # pooled they are scored against each SMC run (the pooled mean averages the runs')
+        runs = row["hmc_runs"]
+        assert runs["runs"] == 3 and len(runs["pooled_to_reference_runs"]) == 2
+        assert max(runs["mean_error_max_each"]) < 3 * row["iid_mean_error_max"]
+        assert runs["pooled_mean_error_max"] <= max(runs["mean_error_max_each"])
+        assert len(set(runs["mean_error_max_each"])) == 3  # independent runs, not one repeated
 
 
 def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():

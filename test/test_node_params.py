@@ -50,6 +50,7 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("mock_hardware", "stiffness:=500", "stiffness"),  # an integer where a float is due
         ("perception", "capture:=sometimes", "capture"),
         ("inference", "method:=mh", "method: 'mh' is not one of"),  # a benchmark baseline only
+        ("inference", "method:=gibbs", "method: 'gibbs' is not one of"),  # biased on depth priors
         ("planner", "load_direction:=[0.0, -2.0]", "load_direction must be a unit vector"),
     ],
 )

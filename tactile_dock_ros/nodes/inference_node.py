@@ -50,7 +50,7 @@ PARAMS = [
     Param(
         "method",
         "hmc",
-        "posterior sampler (not mh: a benchmark baseline whose chains barely move)",
+        "posterior sampler (not mh or gibbs: benchmark baselines that mix too slowly)",
         choices=NODE_METHODS,
     ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),

@@ -11,6 +11,12 @@ often the cycle's plan docks on the HMC samples and on the reference ones, and w
 decides on sample sets of the same size drawn from the reference (give-ups, P_dock): whether
 the episode continues or gives up because of the posterior or because of the sampler.
 
+``--hmc-runs K`` adds K more sampler runs of each checked cycle (independent seeds, warm-started
+from the previous cycle's samples as the loop does): the max error of each run alone, and of the
+K runs pooled against each SMC run. Decision: a bias of HMC is what stays when pooling removes
+its noise; it is shown only if the pooled runs lie farther from the SMC runs than those lie
+from each other (``reference_runs_mean_error_max``), the reference's own resolution.
+
 Example: ``python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance
 19 --prior depth --cycles 3 5 7 --json out.json``. Two runs of 1000 particles took 5-14 min per
 cycle on three_ledges (37-115 rows; the constraint evaluations of the elliptical slice moves);
@@ -23,7 +29,7 @@ import time
 
 import numpy as np
 
-from tactile_dock_ros.core import explore, planner, problems, reference, simulate, slides
+from tactile_dock_ros.core import explore, planner, problems, reference, sampling, simulate, slides
 from tactile_dock_ros.perception.config import PerceptionConfig
 from tactile_dock_ros.tools.bench.docking import (
     MODES,
@@ -64,6 +70,12 @@ def add_arguments(parser) -> None:
         default=2,
         help="independent SMC runs per cycle, pooled (their spread is the reference's own noise)",
     )
+    parser.add_argument(
+        "--hmc-runs",
+        type=_at_least(0),
+        default=0,
+        help="more HMC runs per checked cycle, each alone and pooled against the references",
+    )
     add_episode_arguments(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
 
@@ -97,11 +109,35 @@ def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | 
     return float(docks.mean())
 
 
-def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> dict:
+def _repeats(view: explore.CycleView, shape, warm_start, runs: int, rng) -> list[np.ndarray]:
+    """``runs`` more sampler runs of the cycle's history (vertices each), warm-started from
+    ``warm_start`` (the previous cycle's samples, None for cycle 0) as ``explore`` does."""
+    state = view.state
+    return [
+        sampling.sample_posterior(
+            shape, state.history, len(view.samples), rng, init_z=warm_start,
+            known_dropped=state.dropped,
+        ).vertices
+        for _ in range(runs)
+    ]  # fmt: skip
+
+
+def _repeat_errors(repeats: list[np.ndarray], each: list[np.ndarray], ref_v: np.ndarray) -> dict:
+    pooled = np.concatenate(repeats)
+    return {
+        "runs": len(repeats),
+        "mean_error_max_each": [float(_mean_errors(r, ref_v).max()) for r in repeats],
+        "pooled_mean_error_max": float(_mean_errors(pooled, ref_v).max()),
+        "pooled_to_reference_runs": [float(_mean_errors(pooled, r).max()) for r in each],
+    }
+
+
+def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repeats=()) -> dict:
     """One cycle: its HMC samples against ``runs`` SMC references of the same (kept) history,
     pooled; how far the runs' means lie apart says how far the reference itself can be
     trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.7 std in a
-    vertex mean: far more than independent draws would)."""
+    vertex mean: far more than independent draws would). ``repeats``: more sampler runs'
+    vertices (``_repeats``), scored alone and pooled."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
     start = time.perf_counter()
@@ -123,7 +159,7 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> d
         planner.plan(ref_v[k : k + n], shape, state, view.config)
         for k in range(0, len(ref_v) - n + 1, n)
     ]
-    return {
+    row = {
         "cycle": view.cycle,
         "history_rows": len(kept),
         "dropped_rows": len(state.dropped),
@@ -151,6 +187,9 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng) -> d
             "p_dock_median": float(np.median([d.p_dock for d in decisions])),
         },
     }
+    if len(repeats):
+        row["hmc_runs"] = _repeat_errors(list(repeats), each, ref_v)
+    return row
 
 
 HEADER = (
@@ -174,6 +213,17 @@ def _line(row: dict) -> str:
         f"{ok['hmc']:>7.2f}/{ok['reference']:<8.2f} {row['plan_p_dock']:>11.3f} "
         f"{_share(docks['hmc']):>6}/{_share(docks['reference']):<6} "
         f"{plans['give_up']:>14}/{plans['of']:<3} {plans['p_dock_median']:>12.3f}"
+    )
+
+
+def _repeat_line(row: dict) -> str:
+    runs = row["hmc_runs"]
+    each = runs["mean_error_max_each"]
+    to_refs = " ".join(f"{e:.2f}" for e in runs["pooled_to_reference_runs"])
+    return (
+        f"      {runs['runs']} more HMC runs: max err each {min(each):.2f}-{max(each):.2f} "
+        f"(median {np.median(each):.2f}); pooled {runs['pooled_mean_error_max']:.2f}, to each "
+        f"SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
     )
 
 
@@ -221,8 +271,13 @@ def run(args) -> dict:
             flush=True,
         )
         rng = np.random.default_rng([args.seed, cycle, 7])
-        rows.append(compare(views[cycle], shape, particles, args.references, rng))
+        warm = views[cycle - 1].state.warm_start if cycle else None
+        repeat_rng = np.random.default_rng([args.seed, cycle, 8])  # the references stay as without
+        repeats = _repeats(views[cycle], shape, warm, args.hmc_runs, repeat_rng)
+        rows.append(compare(views[cycle], shape, particles, args.references, rng, repeats))
         print(_line(rows[-1]), flush=True)
+        if repeats:
+            print(_repeat_line(rows[-1]), flush=True)
     return {
         "problem": args.problem,
         "instance": args.instance,
@@ -236,5 +291,6 @@ def run(args) -> dict:
         "particles": particles,
         "references": args.references,
         "samples": args.samples,
+        "hmc_runs": args.hmc_runs,
         "cycles": rows,
     }
