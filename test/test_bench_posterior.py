@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from tactile_dock_ros.core import sampling
 from tactile_dock_ros.tools import bench
 
 
@@ -12,7 +13,7 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
     its third: both are compared with an SMC reference of their history."""
     out = tmp_path / "posterior.json"
     argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
-    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--hmc-runs", "3"]
+    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--sampler-runs", "3"]
     argv += ["--json", str(out)]
     assert bench.main(argv) == 0
     report = json.loads(out.read_text())
@@ -31,7 +32,7 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
         assert row["plan_p_dock"] == pytest.approx(report["p_dock"][row["cycle"]])
         # three more sampler runs of the same history: each agrees with the reference, and
         # pooled they are scored against each SMC run (the pooled mean averages the runs')
-        runs = row["hmc_runs"]
+        runs = row["sampler_runs"]
         assert runs["runs"] == 3 and len(runs["pooled_to_reference_runs"]) == 2
         assert max(runs["mean_error_max_each"]) < 3 * row["iid_mean_error_max"]
         assert runs["pooled_mean_error_max"] <= max(runs["mean_error_max_each"])
@@ -46,3 +47,27 @@ def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
         bench.main([*argv, "--particles", "100", "--samples", "200"])
     with pytest.raises(SystemExit):  # argparse: one run has no spread to measure
         bench.main([*argv, "--references", "1"])
+
+
+def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):
+    """--sampler-method gibbs --sampler-start cold: two Gibbs runs from the sampler's own
+    seeding (no warm start), scored pooled against the reference."""
+    calls = []
+    real = sampling.sample_posterior
+
+    def recording(shape, history, n, rng, method="hmc", **options):
+        calls.append((method, options.get("init_z") is None))
+        return real(shape, history, n, rng, method, **options)
+
+    monkeypatch.setattr(sampling, "sample_posterior", recording)
+    out = tmp_path / "posterior.json"
+    argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
+    argv += ["--max-cycles", "2", "--cycles", "1", "--particles", "200", "--sampler-runs", "2"]
+    argv += ["--sampler-method", "gibbs", "--sampler-start", "cold", "--json", str(out)]
+    assert bench.main(argv) == 0
+    assert calls.count(("gibbs", True)) == 2 and all(m == "hmc" for m, _ in calls[:2])
+    report = json.loads(out.read_text())
+    assert report["sampler_runs"] == {"runs": 2, "method": "gibbs", "start": "cold"}
+    runs = report["cycles"][0]["sampler_runs"]
+    assert runs["runs"] == 2 and 0 < runs["pooled_std_ratio_median"] < 3
+    assert runs["pooled_mean_error_median"] <= runs["pooled_mean_error_max"]

@@ -11,11 +11,13 @@ often the cycle's plan docks on the HMC samples and on the reference ones, and w
 decides on sample sets of the same size drawn from the reference (give-ups, P_dock): whether
 the episode continues or gives up because of the posterior or because of the sampler.
 
-``--hmc-runs K`` adds K more sampler runs of each checked cycle (independent seeds, warm-started
-from the previous cycle's samples as the loop does): the max error of each run alone, and of the
-K runs pooled against each SMC run. Decision: a bias of HMC is what stays when pooling removes
-its noise; it is shown only if the pooled runs lie farther from the SMC runs than those lie
-from each other (``reference_runs_mean_error_max``), the reference's own resolution.
+``--sampler-runs K`` adds K more runs of each checked cycle by ``--sampler-method`` (default
+hmc; independent seeds; ``--sampler-start warm``: from the previous cycle's samples as the loop
+does, ``cold``: from the sampler's own seeding): the max error of each run alone, and of the K
+runs pooled (max, median, spread ratio) against the pooled reference and each SMC run.
+Decision: a sampler's bias is what stays when pooling removes its noise; it is shown only if
+the pooled runs lie farther from the SMC runs than those lie from each other
+(``reference_runs_mean_error_max``), the reference's own resolution.
 
 Example: ``python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance
 19 --prior depth --cycles 3 5 7 --json out.json``. Two runs of 1000 particles took 5-14 min per
@@ -71,10 +73,19 @@ def add_arguments(parser) -> None:
         help="independent SMC runs per cycle, pooled (their spread is the reference's own noise)",
     )
     parser.add_argument(
-        "--hmc-runs",
+        "--sampler-runs",
         type=_at_least(0),
         default=0,
-        help="more HMC runs per checked cycle, each alone and pooled against the references",
+        help="more sampler runs per checked cycle, each alone and pooled against the references",
+    )
+    parser.add_argument(
+        "--sampler-method", default="hmc", choices=sampling.METHODS, help="of --sampler-runs"
+    )
+    parser.add_argument(
+        "--sampler-start",
+        default="warm",
+        choices=("warm", "cold"),
+        help="--sampler-runs from the previous cycle's samples (as the loop) or the seeding",
     )
     add_episode_arguments(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
@@ -109,13 +120,15 @@ def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | 
     return float(docks.mean())
 
 
-def _repeats(view: explore.CycleView, shape, warm_start, runs: int, rng) -> list[np.ndarray]:
-    """``runs`` more sampler runs of the cycle's history (vertices each), warm-started from
-    ``warm_start`` (the previous cycle's samples, None for cycle 0) as ``explore`` does."""
+def _repeats(
+    view: explore.CycleView, shape, warm_start, runs: int, method: str, rng
+) -> list[np.ndarray]:
+    """``runs`` more ``method`` runs of the cycle's history (vertices each), from ``warm_start``
+    (the previous cycle's samples as ``explore`` uses them; None: the sampler's seeding)."""
     state = view.state
     return [
         sampling.sample_posterior(
-            shape, state.history, len(view.samples), rng, init_z=warm_start,
+            shape, state.history, len(view.samples), rng, method, init_z=warm_start,
             known_dropped=state.dropped,
         ).vertices
         for _ in range(runs)
@@ -124,10 +137,15 @@ def _repeats(view: explore.CycleView, shape, warm_start, runs: int, rng) -> list
 
 def _repeat_errors(repeats: list[np.ndarray], each: list[np.ndarray], ref_v: np.ndarray) -> dict:
     pooled = np.concatenate(repeats)
+    errors = _mean_errors(pooled, ref_v)
+    x, r = pooled.reshape(len(pooled), -1), ref_v.reshape(len(ref_v), -1)
+    moving = r.std(axis=0) > 0
     return {
         "runs": len(repeats),
         "mean_error_max_each": [float(_mean_errors(r, ref_v).max()) for r in repeats],
-        "pooled_mean_error_max": float(_mean_errors(pooled, ref_v).max()),
+        "pooled_mean_error_max": float(errors.max()),
+        "pooled_mean_error_median": float(np.median(errors)),
+        "pooled_std_ratio_median": float(np.median(x.std(axis=0)[moving] / r.std(axis=0)[moving])),
         "pooled_to_reference_runs": [float(_mean_errors(pooled, r).max()) for r in each],
     }
 
@@ -188,7 +206,7 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repe
         },
     }
     if len(repeats):
-        row["hmc_runs"] = _repeat_errors(list(repeats), each, ref_v)
+        row["sampler_runs"] = _repeat_errors(list(repeats), each, ref_v)
     return row
 
 
@@ -217,13 +235,14 @@ def _line(row: dict) -> str:
 
 
 def _repeat_line(row: dict) -> str:
-    runs = row["hmc_runs"]
+    runs = row["sampler_runs"]
     each = runs["mean_error_max_each"]
     to_refs = " ".join(f"{e:.2f}" for e in runs["pooled_to_reference_runs"])
     return (
-        f"      {runs['runs']} more HMC runs: max err each {min(each):.2f}-{max(each):.2f} "
-        f"(median {np.median(each):.2f}); pooled {runs['pooled_mean_error_max']:.2f}, to each "
-        f"SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
+        f"      {runs['runs']} more sampler runs: max err each {min(each):.2f}-{max(each):.2f} "
+        f"(median {np.median(each):.2f}); pooled max {runs['pooled_mean_error_max']:.2f} median "
+        f"{runs['pooled_mean_error_median']:.2f} std ratio {runs['pooled_std_ratio_median']:.2f}, "
+        f"to each SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
     )
 
 
@@ -271,9 +290,11 @@ def run(args) -> dict:
             flush=True,
         )
         rng = np.random.default_rng([args.seed, cycle, 7])
-        warm = views[cycle - 1].state.warm_start if cycle else None
+        warm = views[cycle - 1].state.warm_start if cycle and args.sampler_start == "warm" else None
         repeat_rng = np.random.default_rng([args.seed, cycle, 8])  # the references stay as without
-        repeats = _repeats(views[cycle], shape, warm, args.hmc_runs, repeat_rng)
+        repeats = _repeats(
+            views[cycle], shape, warm, args.sampler_runs, args.sampler_method, repeat_rng
+        )
         rows.append(compare(views[cycle], shape, particles, args.references, rng, repeats))
         print(_line(rows[-1]), flush=True)
         if repeats:
@@ -291,6 +312,10 @@ def run(args) -> dict:
         "particles": particles,
         "references": args.references,
         "samples": args.samples,
-        "hmc_runs": args.hmc_runs,
+        "sampler_runs": {
+            "runs": args.sampler_runs,
+            "method": args.sampler_method,
+            "start": args.sampler_start,
+        },
         "cycles": rows,
     }
