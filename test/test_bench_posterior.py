@@ -47,6 +47,8 @@ def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
         bench.main([*argv, "--particles", "100", "--samples", "200"])
     with pytest.raises(SystemExit):  # argparse: one run has no spread to measure
         bench.main([*argv, "--references", "1"])
+    with pytest.raises(SystemExit):  # argparse: rejection may return too few draws to score
+        bench.main([*argv, "--sampler-runs", "2", "--sampler-method", "rejection"])
 
 
 def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):

@@ -58,8 +58,8 @@ SAMPLERS = {
     for s in (
         Sampler("hmc", mcmc=True, on_node=True, burn_in=(3, 1)),
         # a benchmark method: on a late depth-prior cycle (three_ledges, 63 observations) 20
-        # pooled runs lie 0.49 std (median coordinate) from an SMC reference, 1.4x too wide,
-        # where HMC's lie 0.11 (stop 31; docs/inference.md): its axis sweeps do not cross the
+        # pooled runs lie 0.57 std (median coordinate) from an SMC reference, 1.33x too wide,
+        # where HMC's lie 0.03 (stop 31; docs/inference.md): its axis sweeps do not cross the
         # posterior's correlations in the sweeps a cycle can afford
         Sampler("gibbs", mcmc=True, on_node=False, burn_in=(5, 1)),
         # a benchmark baseline only: its chains barely move (split R-hat ~4 on Fig. 9 problem

@@ -79,7 +79,7 @@ def add_arguments(parser) -> None:
         help="more sampler runs per checked cycle, each alone and pooled against the references",
     )
     parser.add_argument(
-        "--sampler-method", default="hmc", choices=sampling.METHODS, help="of --sampler-runs"
+        "--sampler-method", default="hmc", choices=sampling.MCMC_METHODS, help="of --sampler-runs"
     )
     parser.add_argument(
         "--sampler-start",
