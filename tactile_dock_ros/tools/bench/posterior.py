@@ -136,17 +136,20 @@ def _repeats(
 
 
 def _repeat_errors(repeats: list[np.ndarray], each: list[np.ndarray], ref_v: np.ndarray) -> dict:
+    """Scores of more sampler runs (vertices each) against the pooled reference ``ref_v`` and
+    each SMC run of ``each``: every run alone, and all pooled."""
     pooled = np.concatenate(repeats)
     errors = _mean_errors(pooled, ref_v)
-    x, r = pooled.reshape(len(pooled), -1), ref_v.reshape(len(ref_v), -1)
-    moving = r.std(axis=0) > 0
+    pooled_std = pooled.reshape(len(pooled), -1).std(axis=0)
+    ref_std = ref_v.reshape(len(ref_v), -1).std(axis=0)
+    moving = ref_std > 0
     return {
         "runs": len(repeats),
-        "mean_error_max_each": [float(_mean_errors(r, ref_v).max()) for r in repeats],
+        "mean_error_max_each": [float(_mean_errors(run, ref_v).max()) for run in repeats],
         "pooled_mean_error_max": float(errors.max()),
         "pooled_mean_error_median": float(np.median(errors)),
-        "pooled_std_ratio_median": float(np.median(x.std(axis=0)[moving] / r.std(axis=0)[moving])),
-        "pooled_to_reference_runs": [float(_mean_errors(pooled, r).max()) for r in each],
+        "pooled_std_ratio_median": float(np.median(pooled_std[moving] / ref_std[moving])),
+        "pooled_to_reference_runs": [float(_mean_errors(pooled, ref).max()) for ref in each],
     }
 
 
@@ -205,8 +208,8 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repe
             "p_dock_median": float(np.median([d.p_dock for d in decisions])),
         },
     }
-    if len(repeats):
-        row["sampler_runs"] = _repeat_errors(list(repeats), each, ref_v)
+    if repeats:
+        row["sampler_runs"] = _repeat_errors(repeats, each, ref_v)
     return row
 
 
@@ -291,7 +294,7 @@ def run(args) -> dict:
         )
         rng = np.random.default_rng([args.seed, cycle, 7])
         warm = views[cycle - 1].state.warm_start if cycle and args.sampler_start == "warm" else None
-        repeat_rng = np.random.default_rng([args.seed, cycle, 8])  # the references stay as without
+        repeat_rng = np.random.default_rng([args.seed, cycle, 8])  # references: the same without
         repeats = _repeats(
             views[cycle], shape, warm, args.sampler_runs, args.sampler_method, repeat_rng
         )
