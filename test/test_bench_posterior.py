@@ -54,12 +54,14 @@ def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
 def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):
     """--sampler-method gibbs --sampler-start cold: two Gibbs runs from the sampler's own
     seeding (no warm start), scored pooled against the reference."""
-    calls = []
+    calls, reports = [], []
     real = sampling.sample_posterior
 
     def recording(shape, history, n, rng, method="hmc", **options):
         calls.append((method, options.get("init_z") is None))
-        return real(shape, history, n, rng, method, **options)
+        out = real(shape, history, n, rng, method, **options)
+        reports.append(out.convergence)
+        return out
 
     monkeypatch.setattr(sampling, "sample_posterior", recording)
     out = tmp_path / "posterior.json"
@@ -73,3 +75,7 @@ def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):
     runs = report["cycles"][0]["sampler_runs"]
     assert runs["runs"] == 2 and 0 < runs["pooled_std_ratio_median"] < 3
     assert runs["pooled_mean_error_median"] <= runs["pooled_mean_error_max"]
+    # each run's own convergence report, in order (Gibbs warns often: slowly mixing chains)
+    assert runs["warned_each"] == [not c.converged for c in reports[-2:]]
+    assert runs["reseeded_each"] == [c.reseeded for c in reports[-2:]]
+    assert runs["majority_reseeded_each"] == [c.majority_reseeded for c in reports[-2:]]

@@ -438,6 +438,48 @@ def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch
     assert history_consistent(False, fixed.vertices, history, problem.friction).all()
 
 
+def test_a_pocket_holding_most_chains_is_re_seeded_not_the_others(problem2_reference, caplog):
+    """Warm-start 14 of 20 chains in a pocket: the 6 others are the ones ``trapped_chains``
+    names (away from the median chain), but they hold the posterior's mass (``mass_gap``), so
+    the pocket's chains are re-seeded from them and the means are right. With the head count
+    alone (the rule before stop 32) the 6 were re-seeded into the pocket: every chain ended
+    there. (With 11 or 12 in the pocket no chain is named - the robust std spans both
+    groups - and split R-hat warns: 5.9.)"""
+    problem, history, mean, std = problem2_reference
+    pocket = _pocket_state(problem, history, mean, std)
+    good = sample_posterior(problem.prior, history, 6, np.random.default_rng(1), "rejection").z
+    init = np.vstack([good, np.tile(pocket, (14, 1))])
+    with caplog.at_level("WARNING", logger=sampling.__name__):
+        out = sample_posterior(
+            problem.prior, history, 800, np.random.default_rng(2), chains=20, init_z=init
+        )
+    assert out.convergence.majority_reseeded >= 1 and out.convergence.reseeded >= 14
+    assert out.convergence.converged
+    assert "the larger group is re-seeded" in caplog.text
+    assert _mean_error(out, mean, std) < MEAN_TOL
+
+
+def test_mass_gap_names_the_wider_likelier_group():
+    """Synthetic whitened draws: chains in a narrow region far from the prior's centre score
+    lower than chains in a wide one near it, by many standard errors; an even split of
+    identical chains does not; too few draws or chains cannot be scored."""
+    rng = np.random.default_rng(0)
+    wide = rng.normal(0.0, 0.5, size=(6, 8, 10))
+    narrow = rng.normal(2.0, 0.2, size=(10, 8, 10))
+    draws = np.concatenate([wide, narrow])
+    scores = convergence.chain_log_mass(draws)
+    assert scores[:6].min() > scores[6:].max()
+    assert (
+        convergence.mass_gap(draws, np.arange(6), np.arange(6, 16)) > 4 * convergence.MASS_GAP_LIMIT
+    )
+    same = rng.normal(0.0, 0.5, size=(16, 8, 10))
+    assert (
+        abs(convergence.mass_gap(same, np.arange(6), np.arange(6, 16))) < convergence.MASS_GAP_LIMIT
+    )
+    assert np.isnan(convergence.mass_gap(draws[:, :3], np.arange(6), np.arange(6, 16)))
+    assert np.isnan(convergence.mass_gap(draws[:2], [0], [1]))
+
+
 class _WalkRunner:
     """A random walk (step 0.1) that, with ``kick``, throws the first chain of every call to
     z_0 = 20: a chain the exact test (patched to z_0 < 5) never passes."""

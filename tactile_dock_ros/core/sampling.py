@@ -18,7 +18,14 @@ import numpy as np
 
 from .constraint_systems import HistoryConstraints
 from .constraints import collision_bounds, observation_violations, prune_pairs
-from .convergence import Convergence, rhat_limit, split_rhat, trapped_chains
+from .convergence import (
+    MASS_GAP_LIMIT,
+    Convergence,
+    mass_gap,
+    rhat_limit,
+    split_rhat,
+    trapped_chains,
+)
 from .ess import effective_sample_size
 from .history import History
 from .hmc_exit import INACTIVE, first_exits
@@ -777,23 +784,47 @@ class _ChainRun:
         return draws, z[kept], kept
 
 
+def _trapped_and_sources(draws, coords, exact):
+    """The chains to re-seed, the chains to re-seed them from, and whether those are the
+    larger group: the chains ``trapped_chains`` names, unless they hold clearly more
+    posterior mass than the others (``mass_gap`` > MASS_GAP_LIMIT; then the others). Exact
+    seeds are never re-seeded."""
+    flagged = trapped_chains(coords)
+    rest = np.setdiff1d(np.arange(len(draws)), flagged)
+    exact_idx = np.flatnonzero(exact)
+    if flagged.size and mass_gap(draws, flagged, rest) > MASS_GAP_LIMIT:
+        return np.setdiff1d(rest, exact_idx), flagged, True
+    trapped = np.setdiff1d(flagged, exact_idx)
+    return trapped, np.setdiff1d(np.arange(len(draws)), trapped), False
+
+
 def _reseed_trapped(run, draws, last, exact, rng):
     """Checks the chains (``convergence``) and re-seeds trapped ones from the last states of
-    random other chains, reruns them (with burn-in) and splices their draws in: at most
-    RESEED_ROUNDS rounds. Chains with exact seeds are not re-seeded (they are in their pocket
-    with its posterior probability). Logs a warning when chains disagree.
+    random other chains (``_trapped_and_sources``), reruns them (with burn-in) and splices
+    their draws in: at most RESEED_ROUNDS rounds. Chains with exact seeds are not re-seeded
+    (they are in their pocket with its posterior probability). Logs a warning when chains
+    disagree.
 
     Returns the draws (C, L, m) and the Convergence report."""
     shape = run.shape
-    reseeded, rounds = 0, 0
+    reseeded, rounds, majority = 0, 0, 0
     while True:
         coords = draws @ shape.basis.T + shape.mean
-        trapped = np.setdiff1d(trapped_chains(coords), np.flatnonzero(exact))
+        trapped, good, larger = _trapped_and_sources(draws, coords, exact)
         if trapped.size == 0 or rounds == RESEED_ROUNDS:
             break
         rounds += 1
         reseeded += trapped.size
-        good = np.setdiff1d(np.arange(len(draws)), trapped)
+        if larger:
+            majority += 1
+            LOG.warning(
+                "%d of %d %s chains away from the others hold far more posterior mass than "
+                "the %d others (wider, likelier under the prior): the larger group is re-seeded",
+                good.size,
+                len(draws),
+                run.runner.method,
+                trapped.size,
+            )
         new, new_last, kept = run(last[rng.choice(good, trapped.size)])
         if new.shape[1] == 0:  # no rerun chain verified a draw: drop them all
             kept = kept[:0]
@@ -820,6 +851,7 @@ def _reseed_trapped(run, draws, last, exact, rng):
         trapped=int(trapped.size),
         reseeded=reseeded,
         rounds=rounds,
+        majority_reseeded=majority,
     )
     if not report.converged:
         LOG.warning(

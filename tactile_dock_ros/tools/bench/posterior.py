@@ -122,22 +122,25 @@ def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | 
 
 def _repeats(
     view: explore.CycleView, shape, warm_start, runs: int, method: str, rng
-) -> list[np.ndarray]:
-    """``runs`` more ``method`` runs of the cycle's history (vertices each), from ``warm_start``
-    (the previous cycle's samples as ``explore`` uses them; None: the sampler's seeding)."""
+) -> list[sampling.PosteriorSamples]:
+    """``runs`` more ``method`` runs of the cycle's history, from ``warm_start`` (the previous
+    cycle's samples as ``explore`` uses them; None: the sampler's seeding)."""
     state = view.state
     return [
         sampling.sample_posterior(
             shape, state.history, len(view.samples), rng, method, init_z=warm_start,
             known_dropped=state.dropped,
-        ).vertices
+        )
         for _ in range(runs)
     ]  # fmt: skip
 
 
-def _repeat_errors(repeats: list[np.ndarray], each: list[np.ndarray], ref_v: np.ndarray) -> dict:
-    """Scores of more sampler runs (vertices each) against the pooled reference ``ref_v`` and
-    each SMC run of ``each``: every run alone, and all pooled."""
+def _repeat_errors(
+    runs: list[sampling.PosteriorSamples], each: list[np.ndarray], ref_v: np.ndarray
+) -> dict:
+    """Scores of more sampler runs against the pooled reference ``ref_v`` and each SMC run of
+    ``each``: every run alone (with whether it warned and how it re-seeded), and all pooled."""
+    repeats = [run.vertices for run in runs]
     pooled = np.concatenate(repeats)
     errors = _mean_errors(pooled, ref_v)
     pooled_std = pooled.reshape(len(pooled), -1).std(axis=0)
@@ -146,6 +149,9 @@ def _repeat_errors(repeats: list[np.ndarray], each: list[np.ndarray], ref_v: np.
     return {
         "runs": len(repeats),
         "mean_error_max_each": [float(_mean_errors(run, ref_v).max()) for run in repeats],
+        "warned_each": [not run.convergence.converged for run in runs],
+        "reseeded_each": [run.convergence.reseeded for run in runs],
+        "majority_reseeded_each": [run.convergence.majority_reseeded for run in runs],
         "pooled_mean_error_max": float(errors.max()),
         "pooled_mean_error_median": float(np.median(errors)),
         "pooled_std_ratio_median": float(np.median(pooled_std[moving] / ref_std[moving])),
@@ -157,8 +163,8 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repe
     """One cycle: its HMC samples against ``runs`` SMC references of the same (kept) history,
     pooled; how far the runs' means lie apart says how far the reference itself can be
     trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.7 std in a
-    vertex mean: far more than independent draws would). ``repeats``: more sampler runs'
-    vertices (``_repeats``), scored alone and pooled."""
+    vertex mean: far more than independent draws would). ``repeats``: more sampler runs
+    (``_repeats``), scored alone and pooled."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
     start = time.perf_counter()
@@ -240,10 +246,15 @@ def _line(row: dict) -> str:
 def _repeat_line(row: dict) -> str:
     runs = row["sampler_runs"]
     each = runs["mean_error_max_each"]
+    warned = runs["warned_each"]
+    off = [w for e, w in zip(each, warned, strict=True) if e > 1.0]
     to_refs = " ".join(f"{e:.2f}" for e in runs["pooled_to_reference_runs"])
     return (
         f"      {runs['runs']} more sampler runs: max err each {min(each):.2f}-{max(each):.2f} "
-        f"(median {np.median(each):.2f}); pooled max {runs['pooled_mean_error_max']:.2f} median "
+        f"(median {np.median(each):.2f}; {len(off)} > 1, {sum(off)} of them warned; "
+        f"{sum(warned)} warned, {sum(r > 0 for r in runs['reseeded_each'])} re-seeded, "
+        f"{sum(r > 0 for r in runs['majority_reseeded_each'])} the larger group); "
+        f"pooled max {runs['pooled_mean_error_max']:.2f} median "
         f"{runs['pooled_mean_error_median']:.2f} std ratio {runs['pooled_std_ratio_median']:.2f}, "
         f"to each SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
     )
