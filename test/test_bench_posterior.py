@@ -78,4 +78,4 @@ def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):
     # each run's own convergence report, in order (Gibbs warns often: slowly mixing chains)
     assert runs["warned_each"] == [not c.converged for c in reports[-2:]]
     assert runs["reseeded_each"] == [c.reseeded for c in reports[-2:]]
-    assert runs["majority_reseeded_each"] == [c.majority_reseeded for c in reports[-2:]]
+    assert runs["mass_rounds_each"] == [c.mass_rounds for c in reports[-2:]]

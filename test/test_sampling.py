@@ -438,31 +438,38 @@ def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch
     assert history_consistent(False, fixed.vertices, history, problem.friction).all()
 
 
-def test_a_pocket_holding_most_chains_is_re_seeded_not_the_others(problem2_reference, caplog):
-    """Warm-start 14 of 20 chains in a pocket: the 6 others are the ones ``trapped_chains``
-    names (away from the median chain), but they hold the posterior's mass (``mass_gap``), so
-    the pocket's chains are re-seeded from them and the means are right. With the head count
-    alone (the rule before stop 32) the 6 were re-seeded into the pocket: every chain ended
-    there. (With 11 or 12 in the pocket no chain is named - the robust std spans both
-    groups - and split R-hat warns: 5.9.)"""
+@pytest.mark.parametrize("in_pocket", [10, 14])
+def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
+    problem2_reference, in_pocket, caplog
+):
+    """Warm-start 14 (10) of 20 chains in a pocket. 14: the 6 others are the ones
+    ``trapped_chains`` names (away from the median chain) but they hold the posterior's mass
+    (``mass_gap``); with the head count alone (the rule before stop 32) they were re-seeded
+    into the pocket and every chain ended there. 10: no chain is named (the robust std spans
+    both groups), split R-hat is far above its limit (5.9 before stop 32, with only a
+    warning), and the split (``chain_groups``) is judged by mass. Either way the pocket's
+    chains are re-seeded from the others and the means are right."""
     problem, history, mean, std = problem2_reference
     pocket = _pocket_state(problem, history, mean, std)
-    good = sample_posterior(problem.prior, history, 6, np.random.default_rng(1), "rejection").z
-    init = np.vstack([good, np.tile(pocket, (14, 1))])
+    good = sample_posterior(
+        problem.prior, history, 20 - in_pocket, np.random.default_rng(1), "rejection"
+    ).z
+    init = np.vstack([good, np.tile(pocket, (in_pocket, 1))])
     with caplog.at_level("WARNING", logger=sampling.__name__):
         out = sample_posterior(
             problem.prior, history, 800, np.random.default_rng(2), chains=20, init_z=init
         )
-    assert out.convergence.majority_reseeded >= 1 and out.convergence.reseeded >= 14
+    assert out.convergence.mass_rounds >= 1 and out.convergence.reseeded >= in_pocket
     assert out.convergence.converged
-    assert "the larger group is re-seeded" in caplog.text
+    assert "find far less posterior mass" in caplog.text
     assert _mean_error(out, mean, std) < MEAN_TOL
 
 
-def test_mass_gap_names_the_wider_likelier_group():
+def test_mass_gap_names_the_wider_likelier_group_and_chain_groups_splits_clusters():
     """Synthetic whitened draws: chains in a narrow region far from the prior's centre score
     lower than chains in a wide one near it, by many standard errors; an even split of
-    identical chains does not; too few draws or chains cannot be scored."""
+    identical chains does not; too few draws or chains cannot be scored. Chain means in two
+    clusters are split into those clusters."""
     rng = np.random.default_rng(0)
     wide = rng.normal(0.0, 0.5, size=(6, 8, 10))
     narrow = rng.normal(2.0, 0.2, size=(10, 8, 10))
@@ -478,6 +485,13 @@ def test_mass_gap_names_the_wider_likelier_group():
     )
     assert np.isnan(convergence.mass_gap(draws[:, :3], np.arange(6), np.arange(6, 16)))
     assert np.isnan(convergence.mass_gap(draws[:2], [0], [1]))
+    # two seeds shared round-robin: chain_groups splits them exactly, the smaller side first
+    mixed = rng.normal(0.0, 1.0, size=(16, 8, 10))
+    mixed[1::2, :, 3] += 6.0
+    mixed[[0, 2], :, 3] += 6.0
+    low, high = convergence.chain_groups(mixed)
+    np.testing.assert_array_equal(low, [4, 6, 8, 10, 12, 14])
+    np.testing.assert_array_equal(high, [0, 1, 2, 3, 5, 7, 9, 11, 13, 15])
 
 
 class _WalkRunner:

@@ -6,7 +6,8 @@ infeasible gap; the pocket may hold ~1e-5 of the posterior) keeps drawing from t
 draws are feasible, so no per-sample check sees it, but its mean sits far from the other
 chains'. ``split_rhat`` measures the disagreement; ``trapped_chains`` names the chains;
 ``mass_gap`` says whether the chains it named hold more posterior mass than the others (then
-the others are the trapped ones).
+the others are the trapped ones), or which of two groups (``chain_groups``) is trapped when
+the chains disagree but none was named.
 """
 
 from __future__ import annotations
@@ -34,8 +35,9 @@ class Convergence:
         trapped: chains still flagged as trapped in the returned draws.
         reseeded: chains re-seeded (from other chains' states) and rerun, over all rounds.
         rounds: re-seed rounds run (0: the first run passed).
-        majority_reseeded: rounds in which the chains ``trapped_chains`` named held more
-            posterior mass (``mass_gap``), so the others, the larger group, were re-seeded.
+        mass_rounds: rounds whose chains to re-seed posterior mass chose (``mass_gap``): the
+            larger group, as the chains ``trapped_chains`` named held more mass, or a group of
+            a split (``chain_groups``) when it named none but the chains disagreed.
     """
 
     rhat: float = float("nan")
@@ -43,7 +45,7 @@ class Convergence:
     trapped: int = 0
     reseeded: int = 0
     rounds: int = 0
-    majority_reseeded: int = 0
+    mass_rounds: int = 0
 
     @property
     def converged(self) -> bool:
@@ -120,6 +122,30 @@ def trapped_chains(draws: np.ndarray) -> np.ndarray:
     return flagged if 2 * flagged.size < c else np.zeros(0, dtype=int)
 
 
+def chain_groups(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two groups of chains (C, N, d; C >= 2): the chain means, each coordinate in robust
+    posterior std (as in ``trapped_chains``), projected on their first principal axis and
+    split at the widest gap between neighbours (the smaller side first).
+
+    Decision: when the chains disagree (split R-hat above its limit) but ``trapped_chains``
+    names none - two seeds shared round-robin put half the chains in a pocket, and the robust
+    std of that mixture spans both groups - this is the split to judge by ``mass_gap``: two
+    clusters of chain means lie along one direction, and their gap is the widest (a cold run
+    of the late depth-prior cycle of ``chain_log_mass``: 8 and 8 chains, R-hat 4.0, 2.7 std
+    off; the split found the seeds' two groups exactly)."""
+    x = np.asarray(draws, dtype=float)
+    flat = x.reshape(-1, x.shape[2])
+    centre = np.median(flat, axis=0)
+    scale = 1.4826 * np.median(np.abs(flat - centre), axis=0)
+    means = x.mean(axis=1)
+    means = (means - means.mean(axis=0)) / np.maximum(scale, 1e-12 * (1 + np.abs(centre)))
+    axis = np.linalg.svd(means, full_matrices=False)[2][0]
+    order = np.argsort(means @ axis, kind="stable")
+    cut = int(np.argmax(np.diff((means @ axis)[order]))) + 1
+    low, high = np.sort(order[:cut]), np.sort(order[cut:])
+    return (low, high) if low.size <= high.size else (high, low)
+
+
 def chain_log_mass(z_draws: np.ndarray) -> np.ndarray:
     """(C,) a score of the posterior mass of the region each chain of whitened draws
     (C, N, m; prior N(0, I)) samples, up to a constant shared by all chains: the sum over the m
@@ -152,7 +178,7 @@ def mass_gap(z_draws: np.ndarray, group: np.ndarray, others: np.ndarray) -> floa
     descent (seeds shared round-robin: one pocket seed can hold most chains; a cold run of the
     case in ``chain_log_mass`` kept the pocket that way, 5.2 std off without a warning). A gap
     above MASS_GAP_LIMIT re-seeds the larger group from the smaller one; anything less keeps
-    the majority rule (a false alarm of a slowly mixing chain scores as the others do: random
+    the head-count rule (a false alarm of a slowly mixing chain scores as the others do: random
     splits of the 16 chains of five runs of that cycle with no pocket exceeded 3 in 0-2 %, 4
     never; the pocket's split scored 7.4).
     """

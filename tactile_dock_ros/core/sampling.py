@@ -21,6 +21,7 @@ from .constraints import collision_bounds, observation_violations, prune_pairs
 from .convergence import (
     MASS_GAP_LIMIT,
     Convergence,
+    chain_groups,
     mass_gap,
     rhat_limit,
     split_rhat,
@@ -785,17 +786,28 @@ class _ChainRun:
 
 
 def _trapped_and_sources(draws, coords, exact):
-    """The chains to re-seed, the chains to re-seed them from, and whether those are the
-    larger group: the chains ``trapped_chains`` names, unless they hold clearly more
-    posterior mass than the others (``mass_gap`` > MASS_GAP_LIMIT; then the others). Exact
-    seeds are never re-seeded."""
-    flagged = trapped_chains(coords)
-    rest = np.setdiff1d(np.arange(len(draws)), flagged)
-    exact_idx = np.flatnonzero(exact)
-    if flagged.size and mass_gap(draws, flagged, rest) > MASS_GAP_LIMIT:
-        return np.setdiff1d(rest, exact_idx), flagged, True
-    trapped = np.setdiff1d(flagged, exact_idx)
-    return trapped, np.setdiff1d(np.arange(len(draws)), trapped), False
+    """The chains to re-seed, the chains to re-seed them from, and whether posterior mass
+    (``mass_gap``, beyond MASS_GAP_LIMIT) chose them. The chains ``trapped_chains`` names
+    are re-seeded, unless they hold clearly more mass than the others (then the others are).
+    If it names none but split R-hat is above its limit, the chains are split in two
+    (``chain_groups``) and the group with clearly less mass is re-seeded; with no clear gap,
+    none is (the R-hat warning stays). Exact seeds are never re-seeded."""
+    everyone = np.arange(len(draws))
+    group = trapped_chains(coords)
+    named = group.size > 0
+    if not named:
+        if len(draws) < 2 or not np.max(split_rhat(coords)) > rhat_limit(*coords.shape):
+            return group, everyone, False
+        group, _ = chain_groups(coords)
+    rest = np.setdiff1d(everyone, group)
+    gap = mass_gap(draws, group, rest)
+    if gap > MASS_GAP_LIMIT:
+        group, rest = rest, group
+    elif not (named or gap < -MASS_GAP_LIMIT):
+        return group[:0], everyone, False
+    trapped = np.setdiff1d(group, np.flatnonzero(exact))
+    by_mass = not named or gap > MASS_GAP_LIMIT
+    return trapped, (rest if by_mass else np.setdiff1d(everyone, trapped)), by_mass
 
 
 def _reseed_trapped(run, draws, last, exact, rng):
@@ -807,7 +819,7 @@ def _reseed_trapped(run, draws, last, exact, rng):
 
     Returns the draws (C, L, m) and the Convergence report."""
     shape = run.shape
-    reseeded, rounds, majority = 0, 0, 0
+    reseeded, rounds, by_mass = 0, 0, 0
     while True:
         coords = draws @ shape.basis.T + shape.mean
         trapped, good, larger = _trapped_and_sources(draws, coords, exact)
@@ -816,10 +828,10 @@ def _reseed_trapped(run, draws, last, exact, rng):
         rounds += 1
         reseeded += trapped.size
         if larger:
-            majority += 1
+            by_mass += 1
             LOG.warning(
-                "%d of %d %s chains away from the others hold far more posterior mass than "
-                "the %d others (wider, likelier under the prior): the larger group is re-seeded",
+                "%d of %d %s chains sit where the other %d find far less posterior mass "
+                "(narrower, less likely under the prior): those are re-seeded from these",
                 good.size,
                 len(draws),
                 run.runner.method,
@@ -851,7 +863,7 @@ def _reseed_trapped(run, draws, last, exact, rng):
         trapped=int(trapped.size),
         reseeded=reseeded,
         rounds=rounds,
-        majority_reseeded=majority,
+        mass_rounds=by_mass,
     )
     if not report.converged:
         LOG.warning(

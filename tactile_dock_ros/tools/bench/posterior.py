@@ -151,7 +151,7 @@ def _repeat_errors(
         "mean_error_max_each": [float(_mean_errors(run, ref_v).max()) for run in repeats],
         "warned_each": [not run.convergence.converged for run in runs],
         "reseeded_each": [run.convergence.reseeded for run in runs],
-        "majority_reseeded_each": [run.convergence.majority_reseeded for run in runs],
+        "mass_rounds_each": [run.convergence.mass_rounds for run in runs],
         "pooled_mean_error_max": float(errors.max()),
         "pooled_mean_error_median": float(np.median(errors)),
         "pooled_std_ratio_median": float(np.median(pooled_std[moving] / ref_std[moving])),
@@ -253,7 +253,7 @@ def _repeat_line(row: dict) -> str:
         f"      {runs['runs']} more sampler runs: max err each {min(each):.2f}-{max(each):.2f} "
         f"(median {np.median(each):.2f}; {len(off)} > 1, {sum(off)} of them warned; "
         f"{sum(warned)} warned, {sum(r > 0 for r in runs['reseeded_each'])} re-seeded, "
-        f"{sum(r > 0 for r in runs['majority_reseeded_each'])} the larger group); "
+        f"{sum(r > 0 for r in runs['mass_rounds_each'])} by posterior mass); "
         f"pooled max {runs['pooled_mean_error_max']:.2f} median "
         f"{runs['pooled_mean_error_median']:.2f} std ratio {runs['pooled_std_ratio_median']:.2f}, "
         f"to each SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
