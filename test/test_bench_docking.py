@@ -26,7 +26,8 @@ def test_docking_bench_small(tmp_path):
         assert (row["later_cycle_seconds_median"] is None) == (not later)
         for e in row["episodes"]:  # one check per cycle; the first draws from the prior
             assert len(e["chains_disagree"]) == len(e["cycle_seconds"])
-            assert e["chains_disagree"][0] is None
+            assert len(e["mass_rounds"]) == len(e["cycle_seconds"])
+            assert e["chains_disagree"][0] is None and e["mass_rounds"][0] == 0
     ours, gw = report["results"]
     assert ours["ours_over_best_baseline"] == pytest.approx(ours["cycles_mean"] / gw["cycles_mean"])
     low, high = ours["ours_over_best_baseline_ci95"]

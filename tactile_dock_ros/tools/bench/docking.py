@@ -19,7 +19,8 @@ its 95 % bootstrap interval over the truths (``ratio_interval``), and the wall t
 a history), and the maximum; and ``disagree``, the fraction of the cycles whose sampler could
 check its chains (MCMC with enough draws) where they disagreed (split R-hat over its limit or a
 trapped chain: ``sampling`` warns then; per cycle in each episode's ``chains_disagree``, None
-where nothing was checked).
+where nothing was checked; beside it ``mass_rounds``, the re-seed rounds posterior mass chose,
+``Convergence.mass_rounds``).
 
 Also reported, per prior, mode and strategy (problems pooled): how well the planner's predicted
 P_dock of each executed attempt matched what happened (``attempt_calibration``): the attempts,
@@ -171,6 +172,7 @@ def _episode(task: _Task) -> dict:
             "p_dock": [],
             "cycle_seconds": [],
             "chains_disagree": [],
+            "mass_rounds": [],
         }
     result = explore.run_episode(
         _problem(task.problem),
@@ -194,6 +196,8 @@ def _episode(task: _Task) -> dict:
         # per cycle: the sampler's between-chain check failed (split R-hat over its limit or a
         # trapped chain); None where it could not check (independent draws, short chains)
         "chains_disagree": [_disagree(c.convergence) for c in result.cycles_log],
+        # per cycle: re-seed rounds whose chains posterior mass chose (``convergence``)
+        "mass_rounds": [c.convergence.mass_rounds for c in result.cycles_log],
     }
 
 
