@@ -465,6 +465,26 @@ def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
     assert _mean_error(out, mean, std) < MEAN_TOL
 
 
+def test_the_chains_re_seeded_are_those_with_less_mass_never_exact_ones():
+    """Synthetic whitened draws (coordinates = z): half the chains (two seeds round-robin) in a
+    narrow, unlikely pocket. No chain is named (the robust std spans both groups) but R-hat is
+    far off: the pocket's chains are re-seeded from the others, except the exact-seeded one;
+    chains that agree are left alone."""
+    rng = np.random.default_rng(3)
+    draws = rng.normal(0.0, 0.5, size=(16, 8, 10))
+    draws[1::2] = rng.normal(2.0, 0.1, size=(8, 8, 10))
+    assert convergence.trapped_chains(draws).size == 0
+    exact = np.zeros(16, dtype=bool)
+    exact[3] = True
+    trapped, sources, by_mass = sampling._trapped_and_sources(draws, draws, exact)
+    assert by_mass
+    np.testing.assert_array_equal(trapped, [1, 5, 7, 9, 11, 13, 15])
+    np.testing.assert_array_equal(sources, np.arange(0, 16, 2))
+    calm = rng.normal(0.0, 0.5, size=(16, 8, 10))
+    trapped, sources, by_mass = sampling._trapped_and_sources(calm, calm, exact)
+    assert trapped.size == 0 and not by_mass and sources.size == 16
+
+
 def test_mass_gap_names_the_wider_likelier_group_and_chain_groups_splits_clusters():
     """Synthetic whitened draws: chains in a narrow region far from the prior's centre score
     lower than chains in a wide one near it, by many standard errors; an even split of

@@ -35,9 +35,8 @@ class Convergence:
         trapped: chains still flagged as trapped in the returned draws.
         reseeded: chains re-seeded (from other chains' states) and rerun, over all rounds.
         rounds: re-seed rounds run (0: the first run passed).
-        mass_rounds: rounds whose chains to re-seed posterior mass chose (``mass_gap``): the
-            larger group, as the chains ``trapped_chains`` named held more mass, or a group of
-            a split (``chain_groups``) when it named none but the chains disagreed.
+        mass_rounds: rounds whose chains to re-seed posterior mass chose (``mass_gap``), not
+            the head count of ``trapped_chains``.
     """
 
     rhat: float = float("nan")
@@ -127,12 +126,12 @@ def chain_groups(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     posterior std (as in ``trapped_chains``), projected on their first principal axis and
     split at the widest gap between neighbours (the smaller side first).
 
-    Decision: when the chains disagree (split R-hat above its limit) but ``trapped_chains``
-    names none - two seeds shared round-robin put half the chains in a pocket, and the robust
-    std of that mixture spans both groups - this is the split to judge by ``mass_gap``: two
-    clusters of chain means lie along one direction, and their gap is the widest (a cold run
-    of the late depth-prior cycle of ``chain_log_mass``: 8 and 8 chains, R-hat 4.0, 2.7 std
-    off; the split found the seeds' two groups exactly)."""
+    Decision: ``trapped_chains`` can miss a pocket - two seeds shared round-robin put half the
+    chains in it, and the robust std of that mixture spans both groups - while two clusters of
+    chain means lie along one direction with the widest gap between them: on the late
+    depth-prior cycle of ``chain_log_mass`` a cold run with 8 of 16 chains in a pocket (R-hat
+    4.0, 2.7 std off) had no chain named, and this split found the seeds' two groups
+    exactly."""
     x = np.asarray(draws, dtype=float)
     flat = x.reshape(-1, x.shape[2])
     centre = np.median(flat, axis=0)
@@ -177,10 +176,10 @@ def mass_gap(z_draws: np.ndarray, group: np.ndarray, others: np.ndarray) -> floa
     group. Which group is smaller says nothing about mass when the chains were seeded by
     descent (seeds shared round-robin: one pocket seed can hold most chains; a cold run of the
     case in ``chain_log_mass`` kept the pocket that way, 5.2 std off without a warning). A gap
-    above MASS_GAP_LIMIT re-seeds the larger group from the smaller one; anything less keeps
-    the head-count rule (a false alarm of a slowly mixing chain scores as the others do: random
-    splits of the 16 chains of five runs of that cycle with no pocket exceeded 3 in 0-2 %, 4
-    never; the pocket's split scored 7.4).
+    beyond MASS_GAP_LIMIT re-seeds the group with less mass, whichever is larger; anything
+    less keeps the head-count rule (a false alarm of a slowly mixing chain scores as the others
+    do: random splits of the 16 chains of five runs of that cycle with no pocket exceeded 3 in
+    0-2 %, 4 never; the pocket's split scored 7.4).
     """
     score = chain_log_mass(z_draws)
     a, b = score[np.asarray(group, dtype=int)], score[np.asarray(others, dtype=int)]

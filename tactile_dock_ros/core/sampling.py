@@ -794,10 +794,12 @@ def _trapped_and_sources(draws, coords, exact):
     Otherwise the named chains are re-seeded from the rest (none named: none re-seeded, the
     R-hat warning stays). Exact seeds are never re-seeded.
 
-    Decision: both splits, because either can miss the pocket. A pocket seed shared by 10 of
-    16 chains got the other 6 named (gap 7.4), while its two seeds made chain_groups cut
-    between the pocket's own chains; a pocket holding 8 of 16 chains got 3 of the others named
-    (diluted gap), while chain_groups split the seeds' two groups exactly (gap 10.9)."""
+    Decision: both splits. ``trapped_chains`` can miss the pocket's split: with 8 of 16 chains
+    in a pocket it named 1 of the others (gap 1.1; the head count then re-seeded it into the
+    pocket), while chain_groups split the two seeds' chains exactly (gap 10.9). chain_groups
+    cuts at one gap only, which with three seed clusters can fall between two of them (not
+    seen in the runs measured: with 10 chains on two pocket seeds it found the 6 others, as
+    trapped_chains did, gap 7.4)."""
     everyone = np.arange(len(draws))
     named = trapped_chains(coords)
     disagree = named.size > 0 or np.max(split_rhat(coords)) > rhat_limit(*coords.shape)
