@@ -263,7 +263,8 @@ class InferenceNode(Node):
         if check.reseeded or not check.converged:
             self.get_logger().warning(
                 f"posterior chains disagreed: {check.reseeded} trapped chains re-seeded in "
-                f"{check.rounds} rounds, {check.trapped} still trapped, split R-hat "
+                f"{check.rounds} rounds ({check.mass_rounds} chosen by posterior mass), "
+                f"{check.trapped} still trapped, split R-hat "
                 f"{check.rhat:.3f} (limit {check.rhat_limit:.3f})"
             )
 
