@@ -830,12 +830,12 @@ def _reseed_trapped(run, draws, last, exact, rng):
     reseeded, rounds, by_mass = 0, 0, 0
     while True:
         coords = draws @ shape.basis.T + shape.mean
-        trapped, good, larger = _trapped_and_sources(draws, coords, exact)
+        trapped, good, mass_chose = _trapped_and_sources(draws, coords, exact)
         if trapped.size == 0 or rounds == RESEED_ROUNDS:
             break
         rounds += 1
         reseeded += trapped.size
-        if larger:
+        if mass_chose:
             by_mass += 1
             LOG.warning(
                 "%d of %d %s chains sit where the other %d find far less posterior mass "
@@ -937,8 +937,9 @@ def sample_posterior(
 
     ``chains`` defaults to ``default_chains(method, n_samples)``. MCMC chains start from prior
     draws that fit the history or from seeds found by random descent of f_H (``_seed``); after
-    the run, chains trapped away from the others are re-seeded and rerun, and split R-hat is
-    checked (``convergence``, logged as a warning when the chains disagree). If
+    the run, chains trapped away from the others - the group with clearly less posterior mass
+    when the chains split (``_trapped_and_sources``) - are re-seeded and rerun, and split R-hat
+    is checked (``convergence``, logged as a warning when the chains disagree). If
     ``seed_restarts`` descents all fail, the history is taken as inconsistent (sensor error):
     the observations violated by the best state found are dropped (``dropped``) and sampling
     continues without them, round after round until the rest is consistent (each round drops
