@@ -93,6 +93,14 @@ def rhat_limit(chains: int, draws: int, coords: int) -> float:
     return max(RHAT_LIMIT, float(np.sqrt((half - 1) / half + f / half)))
 
 
+def _robust_centre_and_std(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per coordinate of all draws (C, N, d): the median and 1.4826 x the median absolute
+    deviation (a minority of trapped chains moves neither)."""
+    flat = draws.reshape(-1, draws.shape[2])
+    centre = np.median(flat, axis=0)
+    return centre, 1.4826 * np.median(np.abs(flat - centre), axis=0)
+
+
 def trapped_chains(draws: np.ndarray) -> np.ndarray:
     """Indices of chains (C, N, d) whose mean is more than TRAPPED_STD robust posterior
     standard deviations from the median chain mean in some coordinate (empty if N < MIN_DRAWS
@@ -107,12 +115,10 @@ def trapped_chains(draws: np.ndarray) -> np.ndarray:
     it, so its share of the chains would reflect the seeding, not its posterior mass anyway.
     """
     x = np.asarray(draws, dtype=float)
-    c, n, d = x.shape
+    c, n = x.shape[:2]
     if n < MIN_DRAWS or c < 3:
         return np.zeros(0, dtype=int)
-    flat = x.reshape(-1, d)
-    centre = np.median(flat, axis=0)
-    scale = 1.4826 * np.median(np.abs(flat - centre), axis=0)
+    centre, scale = _robust_centre_and_std(x)
     means = x.mean(axis=1)
     off = np.abs(means - np.median(means, axis=0))
     varies = scale > 1e-12 * (1 + np.abs(centre))
@@ -133,9 +139,7 @@ def chain_groups(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     4.0, 2.7 std off) had no chain named, and this split found the seeds' two groups
     exactly."""
     x = np.asarray(draws, dtype=float)
-    flat = x.reshape(-1, x.shape[2])
-    centre = np.median(flat, axis=0)
-    scale = 1.4826 * np.median(np.abs(flat - centre), axis=0)
+    centre, scale = _robust_centre_and_std(x)
     means = x.mean(axis=1)
     means = (means - means.mean(axis=0)) / np.maximum(scale, 1e-12 * (1 + np.abs(centre)))
     axis = np.linalg.svd(means, full_matrices=False)[2][0]
