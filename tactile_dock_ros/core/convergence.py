@@ -161,7 +161,7 @@ def chain_log_mass(z_draws: np.ndarray) -> np.ndarray:
     for chains that sample alike. A pocket is both narrow and where the prior is thin: on a
     late depth-prior cycle (sloper truth 2, non-compliant, 103 rows, 16 chains of 7 draws)
     the 10 chains of a pocket scored 6.8 lower (median) than the 6 chains in the posterior's
-    bulk, whose scores spread over 1.3 (std) as in runs with no pocket.
+    bulk; in five runs with no pocket the chain scores had a std of 0.7-1.7 (median 1.2).
     """
     z = np.asarray(z_draws, dtype=float)
     if z.shape[1] < MIN_DRAWS:
