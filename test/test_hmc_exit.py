@@ -38,19 +38,18 @@ CASES = {
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
-    """Per chain: the compiled search (live pairs, segments in time order, first infeasible
-    one) gives the same exit as solving the same primitives with ``intervals.ellipse_roots``
-    and judging every segment midpoint on every primitive: whether, when, on which root,
-    and whether the first segment is already infeasible."""
+    """Per chain: the compiled search (coefficients from the system's ellipse terms, the
+    window filter, live pairs, segments in time order, first infeasible one) gives the same
+    exit as solving EVERY primitive with ``intervals.ellipse_roots`` and judging every
+    segment midpoint on every primitive: whether, when, on which root, and whether the first
+    segment is already infeasible. So the filter drops no root that matters."""
     system, z = CASES[case]()
     rng = np.random.default_rng(5)
     p = rng.standard_normal(z.shape)
     span = rng.uniform(0.05, np.pi / 2, len(z))
     coef = system.ellipse_coefficients(z, p)
-    solve = intervals.window_can_vanish(coef, span)
-    live = system.live_pairs(coef[:, 0] + coef[:, 1] + coef[:, 3], solve)
-    solve &= live[:, system.prim_pair]
-    roots, owner = intervals.ellipse_roots(coef, solve, system.linear, span)
+    every = np.ones((len(z), system.n_prims), dtype=bool)
+    roots, owner = intervals.ellipse_roots(coef, every, system.linear, span)
     edges, mids = intervals.segment_edges(roots, np.zeros(len(z)), span)
     n_real = np.sum(np.isfinite(roots), axis=1) + 1
     bad = np.any(system.violations(np.matmul(intervals.trig_basis(mids), coef)) > 0, axis=-1)
@@ -59,10 +58,9 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     rows = np.arange(len(z))
 
     phi = 0.5 * float(span.max())
-    all_linear = bool(np.all(system.linear))
-    got = hmc_exit.first_exits(
-        coef, solve, live, span, phi, intervals.trig_to_quartic(phi), all_linear,
-        system.exit_structure,
+    got = hmc_exit.window_exits(
+        *system.ellipse_terms(z, p), system.window_tables, span, phi,
+        intervals.trig_to_quartic(phi), system.exit_structure,
     )  # fmt: skip
     got_hit, got_dt, got_owner, got_stuck = got
     assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
@@ -80,3 +78,55 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     unit = [system.gradient(z_exit, k) for k in (got_owner[leave], owner[leave, first[leave] - 1])]
     unit = [g / np.linalg.norm(g, axis=1, keepdims=True) for g in unit]
     np.testing.assert_allclose(np.abs(np.sum(unit[0] * unit[1], axis=1)), 1.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_window_filter_skips_most_primitives_on_short_windows(case):
+    """The filter is what makes the compiled search fast: on a 0.15 rad window most
+    primitives are proven to keep their sign and are not solved. Counted through the
+    search's own arrays (``_chain_window``), so a filter that keeps everything fails."""
+    system, z = CASES[case]()
+    p = np.random.default_rng(5).standard_normal(z.shape)
+    lin0, linp = system.ellipse_terms(z, p)
+    plain = system.exit_structure[-1]
+    coef = np.empty((5, system.n_prims))
+    solve = np.empty(system.n_prims, dtype=bool)
+    live = np.empty(system.n_pairs, dtype=bool)
+    quad, bern = np.empty((lin0.shape[1], 3)), np.empty((5, 5))
+    kept = []
+    for c in range(len(z)):
+        hmc_exit._chain_terms(lin0[c], linp[c], plain, quad)
+        hmc_exit._chain_window(
+            lin0[c], linp[c], quad, system.window_tables, 0.15, bern, system.exit_structure,
+            coef, solve, live,
+        )  # fmt: skip
+        np.testing.assert_allclose(coef, system.ellipse_coefficients(z[c : c + 1], p[c : c + 1])[0])
+        kept.append(solve.mean())
+    assert np.median(kept) < 0.25
+
+
+def test_bernstein_map_proves_a_sign_only_where_there_is_no_root():
+    """Where the Bernstein coefficients of a primitive's quartic on [0, t_max] share a strict
+    sign (the window filter's second test), the primitive keeps that sign on the whole
+    window and has no root there; and the test does prove a sign for many primitives."""
+    rng = np.random.default_rng(2)
+    coef = rng.normal(size=(50, 5, 40)) * rng.uniform(0, 2, (50, 1, 40))
+    coef[:, 0] += rng.normal(0, 3, (50, 40))
+    t_max = rng.uniform(0.01, np.pi / 2, 50)
+    roots, owner = intervals.ellipse_roots(
+        coef, np.ones((50, 40), bool), np.zeros(40, dtype=bool), t_max
+    )
+    has_root = np.zeros((50, 40), dtype=bool)
+    finite = np.isfinite(roots)
+    has_root[np.nonzero(finite)[0], owner[finite]] = True
+    maps = np.empty((50, 5, 5))
+    for c in range(50):
+        hmc_exit.bernstein_map(t_max[c], maps[c])
+    bern = np.matmul(maps, coef)  # (50, 5, 40)
+    proven = (bern.min(axis=1) > 0) | (bern.max(axis=1) < 0)
+    assert not np.any(proven & has_root)
+    assert proven.mean() > 0.3
+    t = t_max[:, None] * np.linspace(0, 1, 33)
+    g = np.einsum("cti,cik->ctk", intervals.trig_basis(t), coef)  # (50, 33, 40)
+    keeps = np.all(g * np.sign(bern[:, :1]) > 0, axis=1)
+    assert np.all(keeps[proven])

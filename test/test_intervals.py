@@ -18,7 +18,6 @@ from tactile_dock_ros.core.intervals import (
     quartic_roots,
     sample_truncated_normal,
     trig_basis,
-    window_can_vanish,
 )
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.core.sampling_problems import probe_history
@@ -127,18 +126,6 @@ def test_primitive_values_match_the_direct_pair_evaluation():
     assert np.allclose(
         system.structure.pair_values(system._slots(g)), direct(z + 0.7 * d), atol=1e-12
     )
-
-
-def test_window_filter_never_drops_a_root():
-    rng = np.random.default_rng(2)
-    coef = rng.normal(size=(50, 5, 40)) * rng.uniform(0, 2, (50, 1, 40))
-    coef[:, 0] += rng.normal(0, 3, (50, 40))
-    t_max = rng.uniform(0.01, np.pi / 2, 50)
-    linear = np.zeros(40, dtype=bool)
-    every = ellipse_roots(coef, np.ones((50, 40), bool), linear, t_max)[0]
-    filtered = ellipse_roots(coef, window_can_vanish(coef, t_max), linear, t_max)[0]
-    assert np.array_equal(np.isfinite(every).sum(1), np.isfinite(filtered).sum(1))
-    assert (~window_can_vanish(coef, t_max)).any()
 
 
 def test_linear_system_ellipse_roots():

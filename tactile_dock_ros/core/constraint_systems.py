@@ -25,7 +25,18 @@ def _quad_gradient(y: np.ndarray) -> np.ndarray:
     return y[..., ::-1] * _QUAD_GRADIENT_SIGN
 
 
-class HistoryConstraints:
+class _TrigSystem:
+    """What the HMC loop needs of a system: ``ellipse_terms`` (per chain, small) and the
+    static ``window_tables`` (``hmc_exit.tables``) from which the compiled window search
+    builds each primitive's trig coefficients; here the same coefficients as arrays."""
+
+    def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Trig coefficients (C, 5, K) of each primitive along mu + A(z0 cos t + p sin t)."""
+        terms = self.ellipse_terms(z0, p)
+        return hmc_exit.coefficients(*terms, self.window_tables, self.exit_structure)
+
+
+class HistoryConstraints(_TrigSystem):
     """f_H restricted to (observation, edge) ``pairs`` (eqs. 1-3, 16-17) as a function of z."""
 
     def __init__(self, shape: GaussianShape, history: History, pairs: np.ndarray):
@@ -54,7 +65,7 @@ class HistoryConstraints:
         self.pair_observation = pairs[:, 0]  # (P,) sorted
         self.pair_free = self.structure.free_pair  # (P,) pairs of free observations
         self.contact_observations = np.flatnonzero(~self.structure.free_obs)
-        # for the compiled window-exit search (``hmc_exit.first_exits``)
+        # for the compiled window-exit search (``hmc_exit.window_exits``)
         self.exit_structure = hmc_exit.structure(
             self.pair_prims, self.pair_observation, self.pair_free, ~self.structure.free_obs, False
         )
@@ -76,6 +87,11 @@ class HistoryConstraints:
         edge_basis = shape.basis[shape.edge_rows()[edges]]  # (E, 4, m)
         # (m, 4E) coordinate-major: each edge coordinate of ``_y`` is one contiguous plane
         self._edge_basis = np.ascontiguousarray(edge_basis.T.reshape(self.n_dim, -1))
+        # L_k . z = grad_mean_k . (edge coordinates of A z): 4 terms per primitive, not m
+        prim_edge = self._pair_edge[self.prim_pair]
+        self.window_tables = hmc_exit.tables(
+            grad_mean, prim_edge, self._g_mean, self._psign, prim_edge
+        )
 
     def _y(self, z: np.ndarray) -> np.ndarray:
         """Displacements A z of the paired edges' end coordinates, (..., E, 4) (a view of
@@ -155,48 +171,16 @@ class HistoryConstraints:
         prim = self._prim_index[pair, slot]
         return prim, sign
 
-    def live_pairs(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        """(C, P) mask of the pairs whose roots can matter in a window: those that
-        can reach a crossing pattern (all primitives <= 0: enters; free pairs also all >= 0:
-        leaves). Any other pair keeps the sign of its value throughout the window (some
-        primitive keeps a strict sign against the pattern), so its roots change nothing.
-        g0: values at the window start; may_vanish: primitives not proven to keep their sign."""
-        p, nc = self.n_pairs, len(self._cone)
-
-        def every_slot(mask):
-            out = mask[..., :p] & mask[..., p : 2 * p] & mask[..., 2 * p : 3 * p]
-            out &= mask[..., 3 * p : 4 * p]
-            if nc:  # g5, g6 of the stick / slip pairs
-                out[..., self._cone] &= mask[..., 4 * p : 4 * p + nc] & mask[..., 4 * p + nc :]
-            return out
-
-        enter = every_slot((g0 <= 0) | may_vanish)
-        leave = self.structure.free_pair & every_slot((g0 >= 0) | may_vanish)
-        return enter | leave
-
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
         return self.structure.pair_values(self._slots(self.values(z)))
 
-    def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Trig coefficients (C, 5, K) of each primitive along mu + A(z0 cos t + p sin t).
-
-        Coefficient-major (k0..k4 each a contiguous (C, K) plane), so that the writes here, the
-        window filter and the window-start values stream through memory."""
+    def ellipse_terms(self, z0: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The paired edges' end displacements A z0 and A p along mu + A(z0 cos t + p sin t),
+        (C, E, 4) each: all ``hmc_exit`` needs of a chain (see ``window_tables``)."""
         c = len(z0)
-        y = self._y(np.concatenate([z0, p]))
-        al, be = y[:c], y[c:]
-        q_aa, q_bb = quad(al), quad(be)
-        q_edge = np.stack([0.5 * (q_aa + q_bb), 0.5 * (q_aa - q_bb), bilinear(al, be)], axis=1)
-        q = q_edge[..., self._pair_edge]  # (C, 3, P): the k0, k3, k4 terms
-        out = np.empty((c, 5, self.n_prims))
-        out[:, 0] = self._g_mean
-        np.matmul(z0, self._lin_z, out=out[:, 1])
-        np.matmul(p, self._lin_z, out=out[:, 2])
-        out[:, 3:] = 0.0
-        for i, j in enumerate((0, 3, 4)):
-            self._with_quadratic(out[:, j], q[:, i])
-        return out
+        y = np.ascontiguousarray(self._y(np.concatenate([z0, p])))
+        return y[:c], y[c:]
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Polynomial coefficients (C, K, 3) of each primitive along mu + A(z0 + t d)."""
@@ -216,7 +200,7 @@ class HistoryConstraints:
         return self._lin_z[:, prim].T + self._psign[prim, None] * quad_part
 
 
-class LinearConstraints:
+class LinearConstraints(_TrigSystem):
     """Plain linear inequalities F z + h <= 0, each its own observation."""
 
     def __init__(self, F: np.ndarray, h: np.ndarray):
@@ -236,6 +220,10 @@ class LinearConstraints:
         self.exit_structure = hmc_exit.structure(  # plain: violated where the value is > 0
             self.pair_prims, self.pair_observation, self.pair_free, np.zeros(self.n_obs), True
         )
+        k = self.n_prims  # k1 = F_k . z: one "edge" per primitive, no quadratic term
+        self.window_tables = hmc_exit.tables(
+            np.ones((k, 1)), np.arange(k), self.h, np.zeros(k), np.zeros(k)
+        )
 
     def values(self, z: np.ndarray) -> np.ndarray:
         return z @ self.F.T + self.h
@@ -246,10 +234,8 @@ class LinearConstraints:
     def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
         return g[:, 0]
 
-    def ellipse_coefficients(self, z0: np.ndarray, p: np.ndarray) -> np.ndarray:
-        zeros = np.zeros((len(z0), self.n_prims))
-        h = np.broadcast_to(self.h, zeros.shape)
-        return np.stack([h, z0 @ self.F.T, p @ self.F.T, zeros, zeros], axis=1)
+    def ellipse_terms(self, z0: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (z0 @ self.F.T)[..., None], (p @ self.F.T)[..., None]
 
     def line_coefficients(self, z0: np.ndarray, d: np.ndarray) -> np.ndarray:
         return np.stack(
@@ -258,9 +244,6 @@ class LinearConstraints:
 
     def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(obs), np.ones(len(obs))
-
-    def live_pairs(self, g0: np.ndarray, may_vanish: np.ndarray) -> np.ndarray:
-        return may_vanish
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:
         return self.F[prim]

@@ -16,11 +16,21 @@ changes, not when a function it calls from another file does: after editing ``ro
 work tree, delete ``core/__pycache__/*.nb?`` (an installed package never changes under its
 cache).
 
-Segment judging (the ``live`` pairs of ``HistoryConstraints.live_pairs``): a free
-observation is violated where any of its live pairs is crossed (pair value > 0), a contact
-observation where all of its live pairs are unsatisfied, and a contact observation without a
-live pair from the window's start. ``plain`` systems (``LinearConstraints``) have one primitive
-per pair and observation, violated where it is > 0.
+The coefficients and the window filter are compiled too (stop 33). On an iteration of a
+late depth-prior three_ledges cycle (16 chains, 7760 primitives of 1691 pairs on 61 edges;
+one-off timing) the numpy coefficients (C, 5, K) (two (C, m) x (m, K) products), their
+Bernstein filter and the live pairs took ~9 ms of the iteration's 9.6 ms, the exit search
+0.6 ms, though under 1 % of the primitives were then solved. A primitive's coefficients
+need only its edge's end displacements A z0, A p (4 numbers each, ``ellipse_terms``: one
+small matrix product per iteration) and quadratic terms, so each chain builds them in one
+pass with the filter, a slope bound settling most primitives before the Bernstein test, and
+nothing of size (C, K) is stored: 3.1-3.3 ms for the same iteration.
+
+Segment judging (the ``live`` pairs, see ``_chain_window``): a free observation is violated
+where any of its live pairs is crossed (pair value > 0), a contact observation where all of
+its live pairs are unsatisfied, and a contact observation without a live pair from the
+window's start. ``plain`` systems (``LinearConstraints``) have one primitive per pair and
+observation, violated where it is > 0.
 """
 
 from __future__ import annotations
@@ -28,16 +38,26 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .intervals import ROOT_MIN_TIME, trig_to_quartic
+from .intervals import ROOT_MIN_TIME, TRIG_TO_POLY, trig_to_quartic
 from .roots import quadratic, quadratic_batch, quartic, quartic_batch
 
+# power -> Bernstein coefficients on [0, 1] of a quartic: b_i = sum_l C(i,l)/C(4,l) c_l
+POWER_TO_BERNSTEIN = np.array(
+    [
+        [1, 0, 0, 0, 0],
+        [1, 1 / 4, 0, 0, 0],
+        [1, 2 / 4, 1 / 6, 0, 0],
+        [1, 3 / 4, 3 / 6, 1 / 4, 0],
+        [1, 1, 1, 1, 1],
+    ]
+)
 # value of an inactive pair slot: far below any primitive's, so the pair's max / min structure
 # ignores it as it would -inf, without inf arithmetic in products
 INACTIVE = -1e300
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _window_roots(coef, solve, span, to_quartic, phi, all_linear, times, owners):
+def _window_roots(coef, solve, span, to_quartic, phi, linear, times, owners):
     """Roots in (ROOT_MIN_TIME, span) of one chain's solved primitives, sorted; their count."""
     n = 0
     x = np.empty(4)
@@ -47,7 +67,7 @@ def _window_roots(coef, solve, span, to_quartic, phi, all_linear, times, owners)
     for k in range(coef.shape[1]):
         if not solve[k]:
             continue
-        if all_linear:
+        if linear:
             quadratic(coef[0, k] - coef[1, k], 2 * coef[2, k], coef[0, k] + coef[1, k], x)
             found, shift = 2, 0.0
         else:
@@ -112,31 +132,149 @@ def _segment_violated(coef, t, live_pairs, n_live, structure, g):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def first_exits(coef, solve, live, span, phi, to_quartic, all_linear, structure):
-    """Per chain c (coef (C, 5, K), solve (C, K), live (C, P), span (C,)): whether it leaves
-    the feasible set in (0, span[c]), when (the root that ends the feasible interval that
-    holds t = 0; span where it does not leave), the primitive that root belongs to (-1 if it
-    does not leave or is infeasible from the start) and whether the first segment is already
-    infeasible (numerical grazing). Quartics are solved in time shifted by phi,
-    ``to_quartic`` = ``intervals.trig_to_quartic(phi)``; ``structure`` is the system's
-    ``exit_structure``: per-pair primitives (P, slots; -1 inactive), observation and
-    free flag, per-observation contact flag, and whether the system is plain."""
-    pair_obs, contact_obs = structure[1], structure[3]
-    n_chains, n_prims = coef.shape[0], coef.shape[2]
+def _edge_quadratics(y0, yp, out):
+    """Trig coefficients k0, k3, k4 (E, 3) into ``out`` of each edge's quad(y0 cos t + yp
+    sin t) (``constraints.quad``, y = (c_x, c_y, d_x, d_y)) from y0, yp (E, 4)."""
+    for e in range(y0.shape[0]):
+        aa = y0[e, 1] * y0[e, 2] - y0[e, 0] * y0[e, 3]
+        bb = yp[e, 1] * yp[e, 2] - yp[e, 0] * yp[e, 3]
+        ab = 0.5 * (y0[e, 1] * yp[e, 2] + yp[e, 1] * y0[e, 2])
+        ab -= 0.5 * (y0[e, 0] * yp[e, 3] + yp[e, 0] * y0[e, 3])
+        out[e, 0], out[e, 1], out[e, 2] = 0.5 * (aa + bb), 0.5 * (aa - bb), ab
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _chain_terms(lin0, linp, plain, quad):
+    """One chain's per-edge quadratic terms (``quad``, (E, 3); zero for plain systems, whose
+    ``psign`` is 0)."""
+    if plain:
+        quad[:] = 0.0
+    else:
+        _edge_quadratics(lin0, linp, quad)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def coefficients(lin0, linp, tables, structure):
+    """Trig coefficients (C, 5, K) of every primitive along each chain's ellipse, from the
+    system's ``ellipse_terms`` (lin0, linp (C, E, J)), ``window_tables`` and
+    ``exit_structure`` (the same code as the window search's)."""
+    n_chains, n_prims, n_pairs = lin0.shape[0], tables[0].shape[0], structure[0].shape[0]
+    out = np.empty((n_chains, 5, n_prims))
+    quad, bern = np.empty((lin0.shape[1], 3)), np.empty((5, 5))
+    solve, live = np.empty(n_prims, dtype=np.bool_), np.empty(n_pairs, dtype=np.bool_)
+    for c in range(n_chains):
+        _chain_terms(lin0[c], linp[c], structure[4], quad)
+        _chain_window(lin0[c], linp[c], quad, tables, 0.0, bern, structure, out[c], solve, live)
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def bernstein_map(span, out):
+    """(5, 5) map into ``out`` from a primitive's trig coefficients (k0..k4) to the Bernstein
+    coefficients of its quartic in u = tan(t/2) on [0, tan(span/2)] (span < pi): where they
+    share one strict sign, so does the primitive on [0, span] (the polynomial lies in their
+    convex hull)."""
+    u = np.tan(0.5 * span)
+    for i in range(5):
+        for j in range(5):
+            acc, power = 0.0, 1.0  # substitute u = u_max s, s in [0, 1]
+            for m in range(5):
+                acc += POWER_TO_BERNSTEIN[i, m] * power * TRIG_TO_POLY[m, j]
+                power *= u
+            out[i, j] = acc
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _chain_window(lin0, linp, quad, tables, span, bern, structure, coef, solve, live):
+    """One chain's trig coefficients (5, K) into ``coef`` (every primitive's, see ``tables``)
+    from its ``ellipse_terms`` (lin0, linp (E, J)) and quadratic terms (``_chain_terms``),
+    and the primitives worth solving in its window [0, span] (``solve``, K) and the pairs
+    worth judging (``live``, P); ``bern`` (5, 5) is scratch.
+
+    A primitive is not solved where it provably keeps a strict sign on the window: first
+    |g(0)| > span max|g'| with |g'| <= |k1| + |k2| + 2 (|k3| + |k4|) (cheap, settles most),
+    else where its Bernstein coefficients (``bernstein_map``) share one strict sign. A pair
+    is live when it can reach a crossing pattern: all its primitives <= 0 (it enters) or,
+    for a free observation's pair, all >= 0 (it leaves), counting a primitive that may
+    vanish as either; any other pair keeps its pattern through the window, so its roots
+    change nothing and they are not solved. Plain systems: the primitives that may vanish
+    are live (exact from a feasible start, as in the HMC loop)."""
+    weights, lin_edge, g_mean, psign, quad_edge = tables
+    pair_prims, _, pair_free, _, plain = structure
+    bernstein_map(span, bern)
+    for k in range(coef.shape[1]):
+        e, qe, s = lin_edge[k], quad_edge[k], psign[k]
+        k1 = 0.0
+        k2 = 0.0
+        for j in range(weights.shape[1]):
+            k1 += weights[k, j] * lin0[e, j]
+            k2 += weights[k, j] * linp[e, j]
+        k0 = g_mean[k] + s * quad[qe, 0]
+        k3 = s * quad[qe, 1]
+        k4 = s * quad[qe, 2]
+        coef[0, k], coef[1, k], coef[2, k], coef[3, k], coef[4, k] = k0, k1, k2, k3, k4
+        g0 = k0 + k1 + k3
+        if abs(g0) > span * (abs(k1) + abs(k2) + 2.0 * (abs(k3) + abs(k4))):
+            solve[k] = False
+            continue
+        lo, hi = np.inf, -np.inf
+        for i in range(5):
+            b = bern[i, 0] * k0 + bern[i, 1] * k1 + bern[i, 2] * k2
+            b += bern[i, 3] * k3 + bern[i, 4] * k4
+            lo, hi = min(lo, b), max(hi, b)
+        solve[k] = not (lo > 0 or hi < 0)
+    for p in range(pair_prims.shape[0]):
+        enter, leave = True, pair_free[p]
+        for j in range(pair_prims.shape[1]):
+            k = pair_prims[p, j]
+            if k >= 0 and not solve[k]:
+                g0 = coef[0, k] + coef[1, k] + coef[3, k]
+                enter = enter and g0 <= 0
+                leave = leave and g0 >= 0
+        live[p] = solve[pair_prims[p, 0]] if plain else enter or leave
+        if not live[p]:
+            for j in range(pair_prims.shape[1]):
+                if pair_prims[p, j] >= 0:
+                    solve[pair_prims[p, j]] = False
+
+
+@numba.njit(cache=True, error_model="numpy")
+def window_exits(lin0, linp, tables, span, phi, to_quartic, structure):
+    """Per chain c, from its ellipse terms (``ellipse_terms`` of the constraint system:
+    ``lin0``, ``linp`` (C, E, J)) and the system's ``window_tables``: whether it leaves the
+    feasible set in (0, span[c]), when (the root that ends the feasible interval that holds
+    t = 0; span where it does not leave), the primitive that root belongs to (-1 if it does
+    not leave or is infeasible from the start) and whether the first segment is already
+    infeasible (numerical grazing). Each chain's coefficients are built and filtered in one
+    pass over the primitives (``_chain_window``) and searched; nothing of size (C, K) is
+    stored. Quartics are solved in time shifted by phi, ``to_quartic`` =
+    ``intervals.trig_to_quartic(phi)``; ``structure`` is the system's ``exit_structure``:
+    per-pair primitives (P, slots; -1 inactive), observation and free flag, per-observation
+    contact flag, and whether the system is plain (one primitive per pair and observation,
+    all linear: quadratics in u solved instead of quartics)."""
+    pair_obs, contact_obs, plain = structure[1], structure[3], structure[4]
+    n_chains, n_prims, n_pairs = lin0.shape[0], tables[0].shape[0], pair_obs.shape[0]
     hit = np.zeros(n_chains, dtype=np.bool_)
     stuck = np.zeros(n_chains, dtype=np.bool_)
     dt = span.copy()
     owner = np.full(n_chains, -1)
+    coef = np.empty((5, n_prims))
+    solve = np.empty(n_prims, dtype=np.bool_)
+    live = np.empty(n_pairs, dtype=np.bool_)
     times = np.empty(4 * n_prims)
     owners = np.empty(4 * n_prims, dtype=np.int64)
-    live_pairs = np.empty(live.shape[1], dtype=np.int64)
+    live_pairs = np.empty(n_pairs, dtype=np.int64)
     covered = np.zeros(contact_obs.shape[0], dtype=np.bool_)
     g = np.empty(6)
+    quad = np.empty((lin0.shape[1], 3))
+    bern = np.empty((5, 5))
     for c in range(n_chains):
+        _chain_terms(lin0[c], linp[c], plain, quad)
+        _chain_window(lin0[c], linp[c], quad, tables, span[c], bern, structure, coef, solve, live)
         n_live = 0
         covered[:] = False
-        for p in range(live.shape[1]):
-            if live[c, p]:
+        for p in range(n_pairs):
+            if live[p]:
                 live_pairs[n_live] = p
                 n_live += 1
                 covered[pair_obs[p]] = True
@@ -147,12 +285,12 @@ def first_exits(coef, solve, live, span, phi, to_quartic, all_linear, structure)
         if blocked:
             hit[c], stuck[c], dt[c] = True, True, 0.0
             continue
-        n = _window_roots(coef[c], solve[c], span[c], to_quartic, phi, all_linear, times, owners)
+        n = _window_roots(coef, solve, span[c], to_quartic, phi, plain, times, owners)
         start = 0.0
         for s in range(n + 1):
             end = times[s] if s < n else span[c]
             mid = 0.5 * (start + end)
-            if _segment_violated(coef[c], mid, live_pairs, n_live, structure, g):
+            if _segment_violated(coef, mid, live_pairs, n_live, structure, g):
                 hit[c], dt[c] = True, start
                 if s == 0:
                     stuck[c] = True
@@ -164,8 +302,8 @@ def first_exits(coef, solve, live, span, phi, to_quartic, all_linear, structure)
 
 
 def structure(pair_prims, pair_obs, pair_free, contact_obs, plain: bool) -> tuple:
-    """``first_exits``' structure argument (see there), C-contiguous with fixed dtypes, so that
-    every system uses the one compiled signature."""
+    """``window_exits``' structure argument (see there), C-contiguous with fixed dtypes, so
+    that every system uses the one compiled signature."""
     return (
         np.ascontiguousarray(pair_prims, dtype=np.int64),
         np.ascontiguousarray(pair_obs, dtype=np.int64),
@@ -175,22 +313,35 @@ def structure(pair_prims, pair_obs, pair_free, contact_obs, plain: bool) -> tupl
     )
 
 
+def tables(weights, lin_edge, g_mean, psign, quad_edge) -> tuple:
+    """``window_exits``' per-system tables: primitive k's trig coefficients along the ellipse
+    of chain c are k1 = weights[k] . lin0[c, lin_edge[k]] (k2 the same with linp),
+    k0 = g_mean[k] + psign[k] q0, k3 and k4 psign[k] times q3, q4, where (q0, q3, q4) are the
+    trig coefficients of quad(lin0[c, e] cos t + linp[c, e] sin t) of edge e = quad_edge[k]
+    (``_edge_quadratics``; see ``constraint_systems``); fixed dtypes as ``structure``."""
+    return (
+        np.ascontiguousarray(weights, dtype=float),
+        np.ascontiguousarray(lin_edge, dtype=np.int64),
+        np.ascontiguousarray(g_mean, dtype=float),
+        np.ascontiguousarray(psign, dtype=float),
+        np.ascontiguousarray(quad_edge, dtype=np.int64),
+    )
+
+
 def warm_up() -> None:
-    """Compile ``first_exits`` for the HMC loop's argument types and the batched root solvers
+    """Compile ``window_exits`` for the HMC loop's argument types and the batched root solvers
     of the line scans (``roots``: Gibbs, seeding descents), or load them from the cache
     (``__pycache__`` next to this file, else numba's user-wide cache): the first call after an
     installation compiles for ~10 s, later processes load it in well under a second. The
     inference node calls this at start-up, so that its first posterior is not the one that
     waits."""
-    phi = 0.05
-    first_exits(
-        np.zeros((1, 5, 1)),
-        np.ones((1, 1), dtype=bool),
-        np.ones((1, 1), dtype=bool),
-        np.full(1, 2 * phi),
-        phi,
-        trig_to_quartic(phi),
-        False,
+    window_exits(
+        np.zeros((1, 1, 4)),
+        np.zeros((1, 1, 4)),
+        tables(np.ones((1, 4)), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
+        np.full(1, 0.1),
+        0.05,
+        trig_to_quartic(0.05),
         structure(np.zeros((1, 1)), np.zeros(1), np.ones(1), np.zeros(1), False),
     )
     quadratic_batch(np.ones(1), np.zeros(1), -np.ones(1))

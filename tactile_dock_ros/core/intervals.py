@@ -79,32 +79,11 @@ def _sorted_roots(
 
 
 # (1 + u^2)^2 g(t) in ascending powers of u = tan(t/2) from (k0, ..., k4): the quartic of
-# ``ellipse_roots``; and power -> Bernstein coefficients on [0, 1]: b_i = sum_l C(i,l)/C(4,l) c_l
-_TRIG_TO_POLY = np.array(
+# ``ellipse_roots`` (and of the HMC window filter's Bernstein test, ``hmc_exit``)
+TRIG_TO_POLY = np.array(
     [[1, 1, 0, 1, 0], [0, 0, 2, 0, 4], [2, 0, 0, -6, 0], [0, 0, 2, 0, -4], [1, -1, 0, 1, 0]],
     dtype=float,
 )
-_POWER_TO_BERNSTEIN = np.array(
-    [
-        [1, 0, 0, 0, 0],
-        [1, 1 / 4, 0, 0, 0],
-        [1, 2 / 4, 1 / 6, 0, 0],
-        [1, 3 / 4, 3 / 6, 1 / 4, 0],
-        [1, 1, 1, 1, 1],
-    ]
-)
-
-
-def window_can_vanish(coef: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-    """(C, K) False where a trigonometric primitive (coefficients (C, 5, K)) provably keeps a
-    strict sign on [0, t_max[c]] (t_max < pi): the Bernstein coefficients of its quartic in
-    u = tan(t/2) on [0, tan(t_max/2)] share one strict sign (the polynomial lies in their
-    convex hull)."""
-    u_max = np.tan(0.5 * np.asarray(t_max, dtype=float))
-    powers = u_max[:, None] ** np.arange(5)  # substitute u = u_max s, s in [0, 1]
-    maps = (_POWER_TO_BERNSTEIN * powers[:, None]) @ _TRIG_TO_POLY  # (C, 5, 5)
-    bern = np.matmul(maps, coef)  # (C, 5, K)
-    return ~((bern.min(axis=1) > 0) | (bern.max(axis=1) < 0))
 
 
 def trig_to_quartic(phi: float) -> np.ndarray:
@@ -120,7 +99,7 @@ def trig_to_quartic(phi: float) -> np.ndarray:
             [0, 0, 0, -s2, c2],
         ]
     )  # coefficients of g(phi + tau) in tau
-    return (_TRIG_TO_POLY[::-1] @ shift).T
+    return (TRIG_TO_POLY[::-1] @ shift).T
 
 
 def ellipse_roots(

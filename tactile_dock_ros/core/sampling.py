@@ -29,7 +29,7 @@ from .convergence import (
 )
 from .ess import effective_sample_size
 from .history import History
-from .hmc_exit import INACTIVE, first_exits
+from .hmc_exit import INACTIVE, window_exits
 from .intervals import (
     line_roots,
     line_scan,
@@ -37,7 +37,6 @@ from .intervals import (
     sample_truncated_normal,
     segment_edges,
     trig_to_quartic,
-    window_can_vanish,
 )
 from .shape import GaussianShape
 
@@ -181,10 +180,11 @@ def hmc_chains(
     - the feasible range is solved over look-ahead windows of at most ``window`` rad (default
       0.15 when the system has more than WINDOW_MIN_PRIMITIVES primitives, else the whole move;
       a window without an exit just advances the state: an exact reorganisation of Alg. 1's
-      loop in which far fewer primitives can vanish per solve); numpy filters the primitives
-      that may vanish (Bernstein bound) and the pairs that can change the crossing pattern
-      (``live_pairs``), and ``hmc_exit.first_exits`` (compiled) solves their roots and finds
-      each chain's first infeasible segment;
+      loop in which far fewer primitives can vanish per solve); per chain,
+      ``hmc_exit.window_exits`` (compiled) builds the primitives' coefficients from the
+      system's small ``ellipse_terms``, keeps those that may vanish (slope, then Bernstein
+      bound) in pairs that can change the crossing pattern, solves their roots and finds the
+      first infeasible segment;
     - on systems with quadratic primitives each chain adapts its window to its bounce rate:
       after a bounce at dt into the window the next one is WINDOW_GROWTH dt (at least
       WINDOW_MIN), after a window without an exit twice as long (at most ``window``). Any
@@ -231,14 +231,14 @@ def hmc_chains(
             break
         zc, pc, lc = z[idx], p[idx], left[idx]
         span = np.minimum(lc, win[idx])
-        coef = system.ellipse_coefficients(zc, pc)
-        solve = window_can_vanish(coef, span)
-        g0 = coef[:, 0] + coef[:, 1] + coef[:, 3]
-        live = system.live_pairs(g0, solve)
-        solve &= live[:, system.prim_pair]
         phi = 0.5 * float(span.max())  # quartics in time shifted as in ``ellipse_roots``
-        hit, dt, owner, stuck = first_exits(
-            coef, solve, live, span, phi, trig_to_quartic(phi), all_linear, system.exit_structure
+        hit, dt, owner, stuck = window_exits(
+            *system.ellipse_terms(zc, pc),
+            system.window_tables,
+            span,
+            phi,
+            trig_to_quartic(phi),
+            system.exit_structure,
         )
         stats["travel"] += float(dt.sum())
         moved[idx] += dt
