@@ -14,7 +14,7 @@ from node_helpers import launch_nodes, node_with_driver
 from rclpy.executors import MultiThreadedExecutor
 from ros_helpers import spin_until
 from std_msgs.msg import UInt32
-from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeSamples
+from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.execution.types import Report
@@ -71,6 +71,48 @@ def test_a_restarted_node_restores_the_episode_history_from_its_journal(tmp_path
         assert spin_until(executor, lambda: len(node.episode_state.history) == 0, 10.0)
 
 
+def test_a_restarted_node_samples_warm_from_its_saved_posterior(tmp_path, monkeypatch):
+    """The posterior of the killed node's last cycle is the restarted node's warm start once
+    the same prior and episode id arrive (no report redelivered); the same prior sent again
+    keeps the warm start, another prior drops it."""
+    spec = launch_nodes("mock", state_directory=str(tmp_path / "state"))["inference"]
+    args = ["-p", "inference:num_samples:=8"]
+    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
+        samples = []
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        prior.publish(_prior_msg())
+        episode.publish(UInt32(data=EPISODE))
+        reports.publish(_report(1, 2))
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == 2, 30.0)
+        saved = node.episode_state.warm_start
+    assert saved is not None and len(saved) == 8
+
+    starts = []  # init_z of every sampling call of the restarted node
+
+    def recording_sampler(prior, history, *args, init_z=None, **kwargs):
+        starts.append(init_z)
+        return real_sampler(prior, history, *args, init_z=init_z, **kwargs)
+
+    real_sampler = inference_node.sample_posterior
+    monkeypatch.setattr(inference_node, "sample_posterior", recording_sampler)
+    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        episode, _ = _inputs(driver)
+        prior.publish(_prior_msg())
+        episode.publish(UInt32(data=EPISODE))
+        assert spin_until(executor, lambda: starts, 30.0)
+        np.testing.assert_array_equal(starts[0], saved)  # bit-exact, not a cold start
+        prior.publish(_prior_msg())  # re-delivered (e.g. perception restarted): kept
+        assert spin_until(executor, lambda: len(starts) >= 2, 30.0)
+        assert starts[1] is not None
+        prior.publish(_prior_msg("notch"))
+        assert spin_until(executor, lambda: len(starts) >= 3, 30.0)
+        assert starts[2] is None
+
+
 def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
     """The first sampling call blocks until released: meanwhile a second report is taken and
     its history published; the overtaken result is dropped, the full history sampled."""
@@ -108,8 +150,8 @@ def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
         assert all(s.history_length != 1 for s in samples)  # the overtaken result was dropped
 
 
-def _prior_msg():
-    prior = problems.get("sloper").prior
+def _prior_msg(problem: str = "sloper"):
+    prior = problems.get(problem).prior
     return convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane"))
 
 

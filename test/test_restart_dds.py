@@ -3,7 +3,8 @@
 The five processes of the mock profile (tools.restart_faults, what ``ros2 launch`` starts); the
 node dies while the executor runs the episode's second plan. The episode then goes on with the
 whole contact history: the next plan is made on every segment reported so far, the pre-kill
-history unchanged, under the same episode id. Killing the planner also stops the arm within the
+history unchanged, under the same episode id, and inference samples warm from the posterior
+its predecessor saved. Killing the planner also stops the arm within the
 executor's producer_timeout (the running attempt ends ABORTED, "producer lost").
 """
 
@@ -29,6 +30,7 @@ def test_a_killed_inference_node_restarts_with_the_full_history(tmp_path):
     _assert_resumed_with_the_whole_history(run, tmp_path)
     # The attempt that ended while inference was down is in too (the latched reports).
     assert run["history_expected"] > run["history_before"], run
+    assert run["warm_start_restored"], _logs(tmp_path)  # the saved posterior, not a cold start
 
 
 def test_a_killed_planner_stops_the_arm_and_resumes_the_episode(tmp_path):

@@ -11,7 +11,9 @@ episode id came) and, after every change while an episode runs, samples the post
 
 Restart without loss: with ``state_directory`` set, every report applied is journaled
 (``nodes.journal``, ``<state_directory>/inference.jsonl``) before the history is published, and a
-restarted node given the same episode id restores the history from it (docs/nodes.md).
+restarted node given the same episode id restores the history from it (docs/nodes.md). Each
+posterior is saved there too (``nodes.warm_start``), so the restarted node, once the same prior
+arrives, samples warm from it as the running node would have, not cold.
 
 Threads (``main`` spins a MultiThreadedExecutor): the subscriptions (one mutually exclusive
 group) only update the state under a lock and publish the history; sampling runs in a guard
@@ -41,7 +43,7 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
-from tactile_dock_ros.nodes import convert, journal, markers, qos
+from tactile_dock_ros.nodes import convert, journal, markers, qos, warm_start
 from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
 
@@ -59,7 +61,8 @@ PARAMS = [
     Param(
         "state_directory",
         "",
-        "directory of the crash-safe history journal; empty: no journal (a restart loses it)",
+        "directory of the crash-safe history journal and the last posterior (warm start); "
+        "empty: none (a restart loses the history)",
     ),
 ]
 STASHED_REPORTS = 64  # reports of an episode id not (yet) current, kept until it arrives
@@ -86,6 +89,7 @@ class InferenceNode(Node):
         self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
         self.generation = 0  # counts state changes; the sampler publishes only current results
         self.journal = journal.for_node(self.p.state_directory, "inference")
+        self.saved_warm_start: warm_start.WarmStart | None = None  # read at restore, until used
         self.history_pub = self.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
         self.samples_pub = self.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
@@ -102,10 +106,19 @@ class InferenceNode(Node):
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         prior = convert.shape_from_msg(msg)
+        fingerprint = warm_start.prior_fingerprint(prior)
         with self.lock:
+            same = (
+                self.prior is not None and warm_start.prior_fingerprint(self.prior) == fingerprint
+            )
             self.prior = prior
-            self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
-        self.get_logger().info(f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns")
+            if not same:  # z of another prior's basis: sample cold
+                self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
+            self.adopt_saved_warm_start()
+        self.get_logger().info(
+            f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns"
+            + (" (the same again: warm start kept)" if same else "")
+        )
         self.changed()
 
     def on_episode(self, msg: UInt32) -> None:
@@ -121,6 +134,7 @@ class InferenceNode(Node):
             self.episode_state = EpisodeState()
             self.handled_plans.clear()
             restored = self.restore()
+            self.adopt_saved_warm_start()
         self.get_logger().info(
             f"episode {self.episode}: history restored from the journal, {restored} reports "
             f"({len(self.episode_state.history)} segments)"
@@ -151,7 +165,34 @@ class InferenceNode(Node):
             self.handled_plans.clear()
             self.journal.reset([{"episode": self.episode}])
             return 0
+        try:
+            self.saved_warm_start = warm_start.load(self.p.state_directory)
+        except journal.JournalError as err:  # the history is restored: sample cold
+            self.get_logger().error(f"{err}; sampling cold")
         return len(records) - 1
+
+    def adopt_saved_warm_start(self) -> None:
+        """Take the saved posterior (read by ``restore``) as the warm start once the prior is
+        known, if it fits this episode, history and prior (``WarmStart.unusable``); under
+        the lock."""
+        saved = self.saved_warm_start
+        if saved is None or self.prior is None or self.episode == 0:
+            return
+        self.saved_warm_start = None
+        rows = len(self.episode_state.history)
+        reason = saved.unusable(self.episode, rows, self.prior)
+        if reason is not None:
+            self.get_logger().info(f"saved posterior not used ({reason}): sampling cold")
+            return
+        try:
+            self.episode_state = self.episode_state.sampled(saved.z, saved.dropped)
+        except ValueError as err:  # e.g. dropped rows outside the history
+            self.get_logger().error(f"saved posterior not used ({err}): sampling cold")
+            return
+        self.get_logger().info(
+            f"warm start restored: {len(saved.z)} posterior samples of {saved.history_length} "
+            f"of the {rows} history rows"
+        )
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
@@ -224,6 +265,8 @@ class InferenceNode(Node):
                 return  # the state changed while sampling: the newer trigger resamples
             if posterior is not None:
                 self.episode_state = state.sampled(posterior.z, posterior.dropped)
+        if posterior is not None and self.journal is not None:
+            self.save_warm_start(episode, len(history), prior, posterior)
         if posterior is None or len(posterior.vertices) < 2:
             # the planner needs two (moment fit); tell it there are none
             count = 0 if posterior is None else len(posterior.vertices)
@@ -267,6 +310,17 @@ class InferenceNode(Node):
                 f"{check.trapped} still trapped, split R-hat "
                 f"{check.rhat:.3f} (limit {check.rhat_limit:.3f})"
             )
+
+    def save_warm_start(self, episode: int, rows: int, prior, posterior) -> None:
+        """Save the posterior for a restart (``nodes.warm_start``); a failure is logged, the
+        node goes on (a restart would then sample cold)."""
+        saved = warm_start.WarmStart(
+            episode, rows, warm_start.prior_fingerprint(prior), posterior.z, posterior.dropped
+        )
+        try:
+            warm_start.save(self.p.state_directory, saved)
+        except journal.JournalError as err:
+            self.get_logger().error(f"warm start: {err}; a restart would sample cold")
 
 
 def main(args: list[str] | None = None) -> int:

@@ -79,22 +79,30 @@ class Journal:
 
     def reset(self, records: list[dict]) -> None:
         """Replace the journal with ``records``, atomically."""
-        tmp = self.path.with_suffix(self.path.suffix + ".tmp")
         text = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in records).encode()
-        try:
-            with open(tmp, "wb") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path)
-            fd = os.open(self.path.parent, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-        except OSError as err:
-            raise JournalError(f"cannot write {self.path}: {err}") from err
+        replace_atomically(self.path, text)
         self.records = list(records)
+
+
+def replace_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` as the file ``path``: temporary file, ``fsync``, rename, directory
+    ``fsync``, so a reader sees the old file or the new one, never a mixture; JournalError
+    when it cannot be written."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise JournalError(f"cannot write {path}: {err}") from err
 
 
 def for_node(state_directory: str, name: str) -> Journal | None:

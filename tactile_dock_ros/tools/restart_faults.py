@@ -17,7 +17,9 @@ settings and waits until the planner publishes its next plan. Measured per run:
   (``execution.types.PRODUCER_LOST``), and ``stopped``: every arm command from then until the
   restart is zero;
 * ``resume_s``: from the restart to the next plan (wall clock: startup, discovery, journal
-  replay, sampling and planning on this machine).
+  replay, sampling and planning on this machine);
+* inference only: ``warm_start_restored``, the restarted node sampled warm from the posterior
+  its killed predecessor saved (its log says "warm start restored"; ``nodes.warm_start``).
 
 The executor's ``producer_timeout`` is set to ``PRODUCER_TIMEOUT_S`` (a config copy), so the
 planner's death stops the arm before the running attempt would end on its own, and its
@@ -139,6 +141,9 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
             }
             if node == "planner":
                 out["stopped"] = all(_zero(m) for t, m in commands if t_report <= t <= t_respawn)
+            else:  # only a restarted node restores one: the first start has no saved posterior
+                log = (log_dir / "inference.log").read_text(errors="replace")
+                out["warm_start_restored"] = "warm start restored" in log
             return out
     finally:
         executor.shutdown()
