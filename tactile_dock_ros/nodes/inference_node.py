@@ -79,6 +79,7 @@ class InferenceNode(Node):
         )
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
+        self.prior_fingerprint = ""  # ``warm_start.prior_fingerprint`` of ``prior``
         # the history with each row's plan, and the previous posterior (the warm start)
         self.episode_state = EpisodeState()
         self.frame_id = self.p.plane_frame_id
@@ -108,10 +109,8 @@ class InferenceNode(Node):
         prior = convert.shape_from_msg(msg)
         fingerprint = warm_start.prior_fingerprint(prior)
         with self.lock:
-            same = (
-                self.prior is not None and warm_start.prior_fingerprint(self.prior) == fingerprint
-            )
-            self.prior = prior
+            same = self.prior_fingerprint == fingerprint
+            self.prior, self.prior_fingerprint = prior, fingerprint
             if not same:  # z of another prior's basis: sample cold
                 self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
             self.adopt_saved_warm_start()
@@ -243,6 +242,7 @@ class InferenceNode(Node):
         callback); a result overtaken by a newer history is dropped (that one is sampled)."""
         with self.lock:
             generation, prior, state = self.generation, self.prior, self.episode_state
+            fingerprint = self.prior_fingerprint
             episode, cycle, frame_id = self.episode, len(self.handled_plans) + 1, self.frame_id
         if prior is None or episode == 0:
             return
@@ -266,7 +266,7 @@ class InferenceNode(Node):
             if posterior is not None:
                 self.episode_state = state.sampled(posterior.z, posterior.dropped)
         if posterior is not None and self.journal is not None:
-            self.save_warm_start(episode, len(history), prior, posterior)
+            self.save_warm_start(episode, len(history), fingerprint, posterior)
         if posterior is None or len(posterior.vertices) < 2:
             # the planner needs two (moment fit); tell it there are none
             count = 0 if posterior is None else len(posterior.vertices)
@@ -311,12 +311,10 @@ class InferenceNode(Node):
                 f"{check.rhat:.3f} (limit {check.rhat_limit:.3f})"
             )
 
-    def save_warm_start(self, episode: int, rows: int, prior, posterior) -> None:
+    def save_warm_start(self, episode: int, rows: int, fingerprint: str, posterior) -> None:
         """Save the posterior for a restart (``nodes.warm_start``); a failure is logged, the
         node goes on (a restart would then sample cold)."""
-        saved = warm_start.WarmStart(
-            episode, rows, warm_start.prior_fingerprint(prior), posterior.z, posterior.dropped
-        )
+        saved = warm_start.WarmStart(episode, rows, fingerprint, posterior.z, posterior.dropped)
         try:
             warm_start.save(self.p.state_directory, saved)
         except journal.JournalError as err:
