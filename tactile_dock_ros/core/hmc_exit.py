@@ -24,7 +24,7 @@ Bernstein filter and the live pairs took ~9 ms of the iteration's 9.6 ms, the ex
 need only its edge's end displacements A z0, A p (4 numbers each, ``ellipse_terms``: one
 small matrix product per iteration) and quadratic terms, so each chain builds them in one
 pass with the filter, a slope bound settling most primitives before the Bernstein test, and
-nothing of size (C, K) is stored: 3.1-3.3 ms for the same iteration.
+nothing of size (C, K) is stored: 3.1-3.7 ms for the same iteration (several timings).
 
 Segment judging (the ``live`` pairs, see ``_chain_window``): a free observation is violated
 where any of its live pairs is crossed (pair value > 0), a contact observation where all of
