@@ -2,37 +2,17 @@
 
 import numpy as np
 import pytest
+from constraint_cases import history_system, linear_system
 
-from tactile_dock_ros.core import hmc_exit, intervals, problems
-from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
-from tactile_dock_ros.core.constraints import prune_pairs
-from tactile_dock_ros.core.sampling import sample_posterior
-from tactile_dock_ros.core.sampling_problems import probe_history
-
-
-def _history_system(name: str, seed: int, probes) -> tuple[HistoryConstraints, np.ndarray]:
-    problem = problems.get(name)
-    truth = problem.sample_ground_truth(np.random.default_rng(seed))
-    history = probe_history(problem, truth, probes)
-    shape = problem.prior
-    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
-    posterior = sample_posterior(shape, history, 48, np.random.default_rng(4)).z
-    # plus prior draws: starts that violate observations (the search must say so at once)
-    return system, np.vstack([posterior, shape.sample_z(np.random.default_rng(6), 16)])
-
-
-def _linear_system() -> tuple[LinearConstraints, np.ndarray]:
-    """Random half-spaces around the origin (the feasible start; for these the live set is
-    the primitives that may vanish, exact only from a feasible start, as in the HMC loop)."""
-    rng = np.random.default_rng(7)
-    F = rng.standard_normal((80, 6))
-    return LinearConstraints(F, -rng.uniform(0.2, 1.5, 80)), np.zeros((48, 6))
-
+from tactile_dock_ros.core import hmc_exit, intervals
+from tactile_dock_ros.core.constraint_systems import HistoryConstraints
 
 CASES = {
-    "notch, live-pair judging": lambda: _history_system("notch", 3, np.linspace(-0.25, 0.25, 6)),
-    "sloper, small system": lambda: _history_system("sloper", 3, [0.0]),
-    "linear inequalities": _linear_system,
+    "notch, live-pair judging": lambda: history_system("notch", 3, np.linspace(-0.25, 0.25, 6)),
+    "sloper, small system": lambda: history_system("sloper", 3, [0.0]),
+    # the origin is feasible: for linear systems the live set is the primitives that may
+    # vanish, exact only from a feasible start, as in the HMC loop
+    "linear inequalities": linear_system,
 }
 
 

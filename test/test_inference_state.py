@@ -155,10 +155,15 @@ def _prior_msg(problem: str = "sloper"):
     return convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane"))
 
 
-def test_the_node_compiles_the_hmc_exit_search_at_start_up(tmp_path, monkeypatch):
-    """numba compiles the HMC loop's exit search on its first call (~10 s after an install):
-    the node pays it while starting, not in its first posterior after a contact."""
+def test_the_node_compiles_the_sampler_kernels_at_start_up(tmp_path, monkeypatch):
+    """numba compiles the HMC loop's exit search and the descent's line scan on their first
+    calls (~10 s after an install): the node pays it while starting, not in its first
+    posterior after a contact."""
     calls = []
-    monkeypatch.setattr(inference_node.hmc_exit, "warm_up", lambda: calls.append("warm_up"))
+    for module in (inference_node.hmc_exit, inference_node.descent_scan):
+        monkeypatch.setattr(module, "warm_up", lambda name=module.__name__: calls.append(name))
     with node_with_driver(launch_nodes("mock")["inference"], tmp_path):
-        assert calls == ["warm_up"]
+        assert sorted(calls) == [
+            "tactile_dock_ros.core.descent_scan",
+            "tactile_dock_ros.core.hmc_exit",
+        ]

@@ -123,9 +123,7 @@ def test_primitive_values_match_the_direct_pair_evaluation():
     assert np.allclose(system.pair_violations(z), direct(z), atol=1e-12)
     coef = system.line_coefficients(z, d)  # (N, K, 3): q0 + q1 t + q2 t^2
     g = coef[..., 0] + 0.7 * coef[..., 1] + 0.49 * coef[..., 2]
-    assert np.allclose(
-        system.structure.pair_values(system._slots(g)), direct(z + 0.7 * d), atol=1e-12
-    )
+    assert np.allclose(system.pair_values_of(g), direct(z + 0.7 * d), atol=1e-12)
 
 
 def test_linear_system_ellipse_roots():

@@ -116,11 +116,6 @@ class HistoryConstraints(_TrigSystem):
         """Flat primitive indices of slot ``slot`` (0..5 for g1..g6) of the given pairs."""
         return self._prim_index[pair, slot]
 
-    def _slots(self, g: np.ndarray) -> np.ndarray:
-        full = np.full((*g.shape[:-1], self.n_pairs, 6), -np.inf)
-        full[..., self.prim_pair, self.prim_slot] = g
-        return full
-
     def pair_values_of(self, g: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) from primitive values (..., K)."""
         p, nc = self.n_pairs, len(self._cone)
@@ -150,18 +145,21 @@ class HistoryConstraints(_TrigSystem):
         contact = np.maximum(gmax, np.maximum(g5, g6))
         return np.where(self.structure.free_pair[pair, None], free_val, contact)
 
-    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For each row, the primitive k and sign s with f_obs(z) = s g_k(z) locally (the
-        active branch of the max/min structure); used as a descent direction."""
-        slots = self._slots(self.values(z))  # (C, P, 6)
-        pv = self.structure.pair_values(slots)  # (C, P)
+    def steepest_primitive(
+        self, values: np.ndarray, obs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """For each row of primitive values (C, K) (``values`` at states z), the primitive k
+        and sign s with f_obs(z) = s g_k(z) locally (the active branch of the max/min
+        structure); used as a descent direction."""
+        pv = self.pair_values_of(values)  # (C, P)
         in_obs = self.structure.pairs[:, 0][None] == np.asarray(obs)[:, None]
         free = self.structure.free_obs[obs]
         # free observations: the worst pair (max); contact: the best pair (min)
         key = np.where(in_obs, np.where(free[:, None], -pv, pv), np.inf)
         pair = np.argmin(key, axis=1)
-        rows = np.arange(len(z))
-        g = slots[rows, pair]  # (C, 6)
+        slot_prims = self._prim_index[pair]  # (C, 6)
+        rows = np.arange(len(values))[:, None]
+        g = np.where(slot_prims >= 0, values[rows, np.maximum(slot_prims, 0)], -np.inf)
         g4 = g[:, :4]
         enter_branch = -g4.max(axis=1) >= g4.min(axis=1)  # all g <= 0: raise the largest
         slot = np.where(
@@ -173,7 +171,7 @@ class HistoryConstraints(_TrigSystem):
 
     def pair_violations(self, z: np.ndarray) -> np.ndarray:
         """Per-pair values (..., P) at states z (see ``PairStructure.pair_values``)."""
-        return self.structure.pair_values(self._slots(self.values(z)))
+        return self.pair_values_of(self.values(z))
 
     def ellipse_terms(self, z0: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The paired edges' end displacements A z0 and A p along mu + A(z0 cos t + p sin t),
@@ -242,7 +240,9 @@ class LinearConstraints(_TrigSystem):
             [z0 @ self.F.T + self.h, d @ self.F.T, np.zeros((len(z0), self.n_prims))], axis=-1
         )
 
-    def steepest_primitive(self, z: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def steepest_primitive(
+        self, values: np.ndarray, obs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(obs), np.ones(len(obs))
 
     def gradient(self, z: np.ndarray, prim: np.ndarray) -> np.ndarray:

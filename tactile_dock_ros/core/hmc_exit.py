@@ -91,6 +91,18 @@ def _window_roots(coef, solve, span, to_quartic, phi, linear, times, owners):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def pair_value(g, free, plain):
+    """A pair's value from its slot values g (6,) (g1..g6, inactive slots INACTIVE), as
+    ``PairStructure.pair_values``: > 0 where a free observation's pair is crossed or a
+    contact observation's pair unsatisfied; a plain system's one primitive."""
+    if plain:
+        return g[0]
+    gmax = max(max(g[0], g[1]), max(g[2], g[3]))
+    gmin = min(min(g[0], g[1]), min(g[2], g[3]))
+    return max(-gmax, gmin) if free else max(gmax, max(g[4], g[5]))
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _segment_violated(coef, t, live_pairs, n_live, structure, g):
     """Whether any observation is violated at time t, judged on the live pairs (sorted by
     observation); g (6,) is scratch space."""
@@ -115,13 +127,7 @@ def _segment_violated(coef, t, live_pairs, n_live, structure, g):
                         + coef[3, k] * basis[2]
                         + coef[4, k] * basis[3]
                     )
-            if plain:
-                value = g[0]
-            else:
-                gmax = max(max(g[0], g[1]), max(g[2], g[3]))
-                gmin = min(min(g[0], g[1]), min(g[2], g[3]))
-                value = max(-gmax, gmin) if free else max(gmax, max(g[4], g[5]))
-            if value > 0:
+            if pair_value(g, free, plain) > 0:
                 crossed = True
             else:
                 unsatisfied = False
@@ -330,7 +336,7 @@ def tables(weights, lin_edge, g_mean, psign, quad_edge) -> tuple:
 
 def warm_up() -> None:
     """Compile ``window_exits`` for the HMC loop's argument types and the batched root solvers
-    of the line scans (``roots``: Gibbs, seeding descents), or load them from the cache
+    (``roots``; the line scans': ``descent_scan.warm_up``), or load them from the cache
     (``__pycache__`` next to this file, else numba's user-wide cache): the first call after an
     installation compiles for ~10 s, later processes load it in well under a second. The
     inference node calls this at start-up, so that its first posterior is not the one that

@@ -1,8 +1,9 @@
 """Real roots of quadratics and quartics, compiled (numba): the interval algebra's solvers.
 
 One implementation for every caller: the HMC loop's window-exit search (``hmc_exit``, one
-polynomial at a time) and the batched ``intervals.quadratic_roots`` / ``quartic_roots`` (line
-scans of Gibbs and descent, ``ellipse_feasible_set``). Decision: the quartic's closed form
+polynomial at a time), the batched ``intervals.quadratic_roots`` / ``quartic_roots``
+(``ellipse_feasible_set``) and the sorted roots of the line scans (``line_roots``: Gibbs,
+seeding descents). Decision: the quartic's closed form
 (Ferrari) costs a few dozen flops instead of one LAPACK call per polynomial; where it is
 unreliable the companion matrix's eigenvalues are used (``quartic``).
 """
@@ -148,6 +149,34 @@ def quadratic_batch(a, b, c):
     for i in range(a.shape[0]):
         quadratic(a[i], b[i], c[i], out[i])
     return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def line_roots(coef, lo, hi):
+    """Roots strictly inside (lo[c], hi[c]) of each row's quadratics q0 + q1 t + q2 t^2 (coef
+    (C, K, 3)), sorted per row (ties in primitive order) and padded with +inf: (C, R), and
+    the primitive of each (-1 for padding)."""
+    n_rows, n_prims = coef.shape[0], coef.shape[1]
+    found = np.empty((n_rows, 2 * n_prims))
+    owner = np.empty((n_rows, 2 * n_prims), dtype=np.int64)
+    counts = np.zeros(n_rows, dtype=np.int64)
+    x = np.empty(2)
+    for c in range(n_rows):
+        n = 0
+        for k in range(n_prims):
+            quadratic(coef[c, k, 2], coef[c, k, 1], coef[c, k, 0], x)
+            for i in range(2):
+                if x[i] > lo[c] and x[i] < hi[c]:  # NaN fails both
+                    found[c, n], owner[c, n] = x[i], k
+                    n += 1
+        counts[c] = n
+    times = np.full((n_rows, counts.max() if n_rows else 0), np.inf)
+    who = np.full(times.shape, -1, dtype=np.int64)
+    for c in range(n_rows):
+        order = np.argsort(found[c, : counts[c]], kind="mergesort")
+        for i in range(counts[c]):
+            times[c, i], who[c, i] = found[c, order[i]], owner[c, order[i]]
+    return times, who
 
 
 @numba.njit(cache=True, error_model="numpy")

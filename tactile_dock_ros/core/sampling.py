@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import descent_scan
 from .constraint_systems import HistoryConstraints
 from .constraints import collision_bounds, observation_violations, prune_pairs
 from .convergence import (
@@ -29,7 +30,7 @@ from .convergence import (
 )
 from .ess import effective_sample_size
 from .history import History
-from .hmc_exit import INACTIVE, window_exits
+from .hmc_exit import window_exits
 from .intervals import (
     line_roots,
     line_scan,
@@ -144,14 +145,6 @@ def _line_scan(system, z: np.ndarray, d: np.ndarray):
     lo, hi = mean - LINE_HALF_WIDTH * std, mean + LINE_HALF_WIDTH * std
     edges, values = line_scan(system, z, d, lo, hi)
     return edges, values, mean, std
-
-
-def _starts(key: np.ndarray) -> np.ndarray:
-    """Mask of the first element of each run of equal values in ``key`` (1-D)."""
-    out = np.empty(len(key), dtype=bool)
-    out[:1] = True
-    np.not_equal(key[1:], key[:-1], out=out[1:])
-    return out
 
 
 def hmc_chains(
@@ -376,27 +369,6 @@ class ChainRunner:
         return draws
 
 
-def _picked_violated(system, coef, mids, pick) -> np.ndarray:
-    """(C, S) whether observation ``pick[c]`` is violated at the segment midpoints of row c,
-    from its own pairs' primitives only (line coefficients ``coef`` (C, K, 3))."""
-    ci, pj = np.nonzero(system.pair_observation[None, :] == pick[:, None])
-    out = np.ones(mids.shape, dtype=bool)  # a contact observation without pairs: violated
-    if ci.size == 0:
-        return out
-    prims = system.pair_prims[pj]  # (R, slots)
-    coef = coef[ci[:, None], np.maximum(prims, 0)]  # (R, slots, 3)
-    coef[prims < 0] = (INACTIVE, 0.0, 0.0)
-    t = mids[ci][:, None]  # (R, 1, S)
-    g = coef[..., 0, None] + t * (coef[..., 1, None] + t * coef[..., 2, None])  # (R, slots, S)
-    q = system.pair_values_at(pj, g)  # (R, S)
-    free = system.pair_free[pj]
-    starts = np.flatnonzero(_starts(ci))  # pairs come sorted by row
-    worst = np.maximum.reduceat(q, starts, axis=0)  # free: any pair crossed
-    best = np.minimum.reduceat(q, starts, axis=0)  # contact: no pair satisfied
-    out[ci[starts]] = np.where(free[starts, None], worst, best) > 0
-    return out
-
-
 def _descent_step(system, z, pick, d, count_now, rng) -> np.ndarray:
     """One coordinate step of ``random_descent``: states z (C, m) moved along directions d.
 
@@ -419,15 +391,21 @@ def _descent_step(system, z, pick, d, count_now, rng) -> np.ndarray:
         (edges[:, :-1] - mean[:, None]) / std[:, None],
         (edges[:, 1:] - mean[:, None]) / std[:, None],
     )
-    score = np.where(edges[:, 1:] > edges[:, :-1], normal_log_mass(a, b), -np.inf)
-    score = score + np.where(_picked_violated(system, coef, mids, pick), 0.0, 1e3)
+    score = np.full(mids.shape, -np.inf)
+    real = edges[:, 1:] > edges[:, :-1]  # not the padding collapsed onto hi
+    score[real] = normal_log_mass(a[real], b[real])
+    structure = system.exit_structure
+    score += np.where(descent_scan.picked_violated(coef, mids, pick, structure), 0.0, 1e3)
     n_cand = min(DESCENT_CANDIDATES, score.shape[1])
     cand = np.argpartition(-score, n_cand - 1, axis=1)[:, :n_cand]
     current = np.sum(edges[:, 1:] < 0.0, axis=1)  # the segment holding t = 0
     cand = np.concatenate([cand, current[:, None]], axis=1)
     t = np.take_along_axis(mids, cand, 1)
     powers = np.stack([np.ones_like(t), t, t * t], axis=-1)
-    count = np.sum(system.violations(np.matmul(powers, coef.swapaxes(1, 2))) > 0, axis=-1)
+    values = np.matmul(powers, coef.swapaxes(1, 2))  # (C, candidates, K)
+    cap = np.repeat(count_now, t.shape[1])  # above the current segment's: never the fewest
+    count = descent_scan.violated_counts(values.reshape(-1, values.shape[-1]), structure, cap)
+    count = count.reshape(t.shape)
     count = np.where(np.isfinite(np.take_along_axis(score, cand, 1)), count, np.iinfo(int).max)
     count[:, -1] = count_now  # the current segment: the rows' violated counts at t = 0
     best = np.zeros(mids.shape, dtype=bool)
@@ -458,9 +436,10 @@ def random_descent(
         todo = np.flatnonzero(count > 0)
         if len(z) - todo.size >= enough:
             break
-        viol = system.violations(system.values(z[todo])) > 0
+        values = system.values(z[todo])
+        viol = system.violations(values) > 0
         pick = np.argmax(viol * rng.random(viol.shape), axis=1)  # a random violated one
-        prim, _ = system.steepest_primitive(z[todo], pick)
+        prim, _ = system.steepest_primitive(values, pick)
         weight = system.gradient(z[todo], prim) ** 2 + 1e-12 / m
         cum = np.cumsum(weight, axis=1)
         axis = np.argmax(cum >= rng.random((todo.size, 1)) * cum[:, -1:], axis=1)

@@ -37,7 +37,7 @@ from rclpy.node import Node
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
-from tactile_dock_ros.core import hmc_exit
+from tactile_dock_ros.core import descent_scan, hmc_exit
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
@@ -74,8 +74,10 @@ class InferenceNode(Node):
         self.p = declare(self, PARAMS)
         started = time.perf_counter()
         hmc_exit.warm_up()  # compiles on the first start after an install (~10 s), then cached
+        descent_scan.warm_up()
         self.get_logger().info(
-            f"HMC exit search ready in {time.perf_counter() - started:.1f} s (compiled or cached)"
+            f"HMC exit search and descent scan ready in {time.perf_counter() - started:.1f} s"
+            " (compiled or cached)"
         )
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
