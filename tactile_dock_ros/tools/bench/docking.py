@@ -430,8 +430,18 @@ def _line(row: dict) -> str:
     )
 
 
-def _stop(signum, frame):
-    raise KeyboardInterrupt
+class _StopRequest:
+    """SIGINT / SIGTERM handler: raises KeyboardInterrupt where the run is (a prompt stop) and
+    remembers the request, so that the run also stops after the current episode if code under
+    it swallowed the exception (a single-process run once finished every episode after a
+    SIGTERM in CI, stop 29: not reproduced, cause unknown)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, signum, frame) -> None:
+        self.requested = True
+        raise KeyboardInterrupt
 
 
 def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
@@ -439,6 +449,7 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
     run and keeps the finished episodes (handlers set here: a shell starts background jobs
     with SIGINT ignored)."""
     out: list[dict | None] = [None] * len(tasks)
+    stop = _StopRequest()
 
     def done(k: int, record: dict) -> None:
         out[k] = record
@@ -451,8 +462,10 @@ def _run_all(tasks: list[_Task], workers: int) -> list[dict | None]:
             file=sys.stderr,
             flush=True,
         )
+        if stop.requested:
+            raise KeyboardInterrupt
 
-    handlers = {sig: signal.signal(sig, _stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handlers = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         if workers == 1:
             for k, task in enumerate(tasks):
