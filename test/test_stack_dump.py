@@ -24,7 +24,7 @@ def _wait_for(log, text, timeout_s=120.0):
 def test_a_running_node_dumps_its_stacks_and_goes_on(tmp_path):
     with bringup.running({"profile": "mock"}, tmp_path, only={"inference"}) as processes:
         log = tmp_path / "inference.log"
-        assert _wait_for(log, "HMC exit search ready"), log.read_text(errors="replace")
+        assert _wait_for(log, "sampler kernels ready"), log.read_text(errors="replace")
         # that line comes from the node's constructor: until the node spins a dump shows the
         # constructor's frames, so ask again (each dump must come) until the spin loop shows
         deadline = time.monotonic() + 60.0

@@ -76,8 +76,8 @@ class InferenceNode(Node):
         hmc_exit.warm_up()  # compiles on the first start after an install (~10 s), then cached
         descent_scan.warm_up()
         self.get_logger().info(
-            f"HMC exit search and descent scan ready in {time.perf_counter() - started:.1f} s"
-            " (compiled or cached)"
+            f"sampler kernels ready in {time.perf_counter() - started:.1f} s (HMC exit search,"
+            " descent line scan; compiled or cached)"
         )
         self.rng = np.random.default_rng(self.p.seed)
         self.prior = None
