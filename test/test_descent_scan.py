@@ -1,6 +1,12 @@
 """The compiled line scan of the seeding descent (sorted roots, segment judging) against the
 numpy interval algebra it replaced."""
 
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from constraint_cases import history_system, linear_system
@@ -105,3 +111,39 @@ def test_segment_judging_matches_the_numpy_reduction(case):
     capped = descent_scan.violated_counts(values, system.exit_structure, cap)
     assert np.array_equal(capped, np.minimum(want, cap + 1))
     assert np.any(want > cap) and np.any(want <= cap)
+
+
+WARM_UP_COVERS_THE_SAMPLER = """
+import json
+import numpy as np
+from constraint_cases import history_system
+from tactile_dock_ros.core import descent_scan, hmc_exit, problems, roots, sampling
+kernels = [hmc_exit.window_exits, roots.line_roots, descent_scan.picked_violated,
+           descent_scan.violated_counts]
+hmc_exit.warm_up()
+descent_scan.warm_up()
+warmed = [len(k.signatures) for k in kernels]
+system, z = history_system("notch", 3, np.linspace(-0.25, 0.25, 6))
+start = problems.get("notch").prior.sample_z(np.random.default_rng(2), 8)
+assert sampling._violated_count(system, start).min() > 0  # every row takes descent steps
+sampling.random_descent(system, start, np.random.default_rng(0), 5)
+sampling.hmc_chains(system, z[:8], 2, np.random.default_rng(1))
+print(json.dumps({"warmed": warmed, "after": [len(k.signatures) for k in kernels]}))
+"""
+
+
+def test_the_warm_up_compiles_the_signatures_the_sampler_calls():
+    """The node's start-up warm-up must compile the very argument types of a descent step and
+    an HMC move (dtype, layout, writeability), or the first posterior compiles again (~25 s
+    after an install). In a fresh process: no kernel gains a signature after the warm-up."""
+    path = os.pathsep.join([str(Path(__file__).parent), *sys.path])
+    out = subprocess.run(
+        [sys.executable, "-c", WARM_UP_COVERS_THE_SAMPLER],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "PYTHONPATH": path},
+    )
+    assert out.returncode == 0, out.stderr
+    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    assert counts["warmed"] == [1, 1, 1, 1] and counts["after"] == counts["warmed"], counts

@@ -138,7 +138,7 @@ def line_roots(coef: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.nda
     (compiled, ``roots.line_roots``: a depth-prior descent line crosses ~1000 roots per row)."""
     coef = np.ascontiguousarray(coef, dtype=float)
     c = len(coef)
-    lo, hi = (np.ascontiguousarray(np.broadcast_to(v, c), dtype=float) for v in (lo, hi))
+    lo, hi = (np.array(np.broadcast_to(v, c), dtype=float) for v in (lo, hi))  # writeable
     return roots.line_roots(coef, lo, hi)
 
 
