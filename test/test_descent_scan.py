@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from constraint_cases import history_system, linear_system
 
-from tactile_dock_ros.core import descent_scan, hmc_exit, intervals, roots
+from tactile_dock_ros.core import descent_scan, hmc_exit, intervals, roots, sampling
 
 
 def test_line_roots_are_each_rows_quadratic_roots_inside_its_window_sorted():
@@ -43,11 +43,11 @@ def test_line_roots_are_each_rows_quadratic_roots_inside_its_window_sorted():
 
 
 def test_observation_rules_free_any_pair_contact_every_pair_contact_without_pairs_always():
-    """obs 0 free (pairs 0, 1), obs 1 contact without pairs, obs 2 contact (pairs 2, 3); pair k's
-    four slots all hold primitive k."""
+    """obs 0 free (pairs 0, 1), obs 1 contact without pairs, obs 2 contact (pairs 2, 3), obs 3
+    free without pairs (never violated); pair k's four slots all hold primitive k."""
     pair_prims = np.array([[k, k, k, k, -1, -1] for k in range(4)])
     structure = hmc_exit.structure(
-        pair_prims, [0, 0, 2, 2], [True, True, False, False], [False, True, True], False
+        pair_prims, [0, 0, 2, 2], [True, True, False, False], [False, True, True, False], False
     )
     # free pair value max(-g, g) = |g| > 0 unless g = 0; contact pair value g
     free_0 = [[0.0, 0.0], [0.0, 0.3]]  # obs 0: no pair crossed / one crossed
@@ -61,7 +61,7 @@ def test_observation_rules_free_any_pair_contact_every_pair_contact_without_pair
     coef = np.zeros((4, 4, 3))
     coef[..., 0] = values  # constant along the line
     mids = np.zeros((4, 2))
-    for obs, expect in [(0, [0, 0, 1, 1]), (1, [1, 1, 1, 1]), (2, [0, 1, 0, 1])]:
+    for obs, expect in [(0, [0, 0, 1, 1]), (1, [1, 1, 1, 1]), (2, [0, 1, 0, 1]), (3, [0] * 4)]:
         got = descent_scan.picked_violated(coef, mids, np.full(4, obs), structure)
         assert got[:, 0].tolist() == [bool(e) for e in expect]
 
@@ -111,6 +111,30 @@ def test_segment_judging_matches_the_numpy_reduction(case):
     capped = descent_scan.violated_counts(values, system.exit_structure, cap)
     assert np.array_equal(capped, np.minimum(want, cap + 1))
     assert np.any(want > cap) and np.any(want <= cap)
+
+
+@pytest.mark.parametrize("case", ["notch", "three_ledges"])
+def test_a_descent_step_never_raises_the_violated_count(case, monkeypatch):
+    """The step's rule with the kernels: it moves to a segment with the fewest violations among
+    candidates that include the current one, so a row's count never rises (it rose on a third
+    of the steps with the candidates' count cap at 0)."""
+    system, _ = CASES[case]()
+    counts = []
+    step = sampling._descent_step
+
+    def recorded(system, z, pick, d, count_now, rng):
+        z = step(system, z, pick, d, count_now, rng)
+        counts.append((count_now, sampling._violated_count(system, z)))
+        return z
+
+    monkeypatch.setattr(sampling, "_descent_step", recorded)
+    shape = system.shape
+    start = shape.sample_z(np.random.default_rng(2), 8)
+    sampling.random_descent(system, start, np.random.default_rng(0), 30)
+    before, after = (np.concatenate(c) for c in zip(*counts, strict=True))
+    assert len(counts) >= 10
+    assert np.all(after <= before)
+    assert counts[-1][1].sum() <= counts[0][0].sum() / 2  # and the rows' counts do fall
 
 
 WARM_UP_COVERS_THE_SAMPLER = """

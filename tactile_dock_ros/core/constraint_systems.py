@@ -135,16 +135,6 @@ class HistoryConstraints(_TrigSystem):
         """Per-observation values (..., n_obs) from primitive values (..., K)."""
         return self.reduce_pairs(self.pair_values_of(g))
 
-    def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Values (R, S) of pairs ``pair`` (R,) from their slot values g (R, 6, S), inactive
-        slots -inf or below every active value (see ``PairStructure.pair_values``)."""
-        g1, g2, g3, g4, g5, g6 = g.swapaxes(0, 1)
-        gmax = np.maximum(np.maximum(g1, g2), np.maximum(g3, g4))
-        gmin = np.minimum(np.minimum(g1, g2), np.minimum(g3, g4))
-        free_val = np.maximum(-gmax, gmin)
-        contact = np.maximum(gmax, np.maximum(g5, g6))
-        return np.where(self.structure.free_pair[pair, None], free_val, contact)
-
     def steepest_primitive(
         self, values: np.ndarray, obs: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -228,9 +218,6 @@ class LinearConstraints(_TrigSystem):
 
     def violations(self, g: np.ndarray) -> np.ndarray:
         return g
-
-    def pair_values_at(self, pair: np.ndarray, g: np.ndarray) -> np.ndarray:
-        return g[:, 0]
 
     def ellipse_terms(self, z0: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return (z0 @ self.F.T)[..., None], (p @ self.F.T)[..., None]

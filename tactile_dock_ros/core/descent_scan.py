@@ -4,11 +4,14 @@ On a depth prior a descent step's coordinate line, over +- 3 std, crosses ~1000 
 per chain (sloper: 900-3900 primitives, and a basis column moves many vertices at once), and
 its segments are judged twice: the picked observation at every midpoint (segments that fix it
 are preferred) and every observation at the ~33 candidate midpoints (the violated counts). In
-numpy these were gathers over (chains, pairs, segments): 2.9 and 2.6 ms of a 9.3 ms step
-(captured steps of a sloper depth-prior run, one-off timing). Here each is one compiled loop,
-with the pair rule of the HMC window search (``hmc_exit.pair_value``). Along the line a
-primitive is q0 + t (q1 + t q2) (``line_coefficients``, (C, K, 3)); ``structure`` is the
-system's ``exit_structure`` (pairs sorted by observation).
+numpy these were gathers over (chains, pairs, segments): 2.9 and 2.6 ms of a step's 9.3 ms
+timed piece by piece (8.5 ms as a whole; 40 captured steps of a sloper depth-prior run,
+one-off timing; 4.0 ms now). Here each is one compiled loop, with the pair rule of the HMC
+window search (``hmc_exit.pair_value``); for finite values the verdicts equal the numpy
+reduction's (``PairStructure.reduce_pairs``) bit for bit. Along the line a primitive is
+q0 + t (q1 + t q2) (``line_coefficients``, (C, K, 3)); ``structure`` is the system's
+``exit_structure`` (pairs sorted by observation). numba's cache does not notice edits of
+``hmc_exit.pair_value``: delete ``core/__pycache__/*.nb?`` after one (see ``hmc_exit``).
 """
 
 from __future__ import annotations

@@ -12,9 +12,9 @@ and cached next to this file; the roots come from the same solvers as the batche
 algebra's (``roots.quartic``: Ferrari closed form, Newton polish, companion-matrix eigenvalues
 where the closed form is unreliable or misses a sign change across the window), so the draws
 match the numpy search up to rounding. numba invalidates a cached function when its own file
-changes, not when a function it calls from another file does: after editing ``roots.py`` in a
-work tree, delete ``core/__pycache__/*.nb?`` (an installed package never changes under its
-cache).
+changes, not when a function it calls from another file does: after editing ``roots.py`` (or
+this file, whose ``pair_value`` ``descent_scan`` calls) in a work tree, delete
+``core/__pycache__/*.nb?`` (an installed package never changes under its cache).
 
 The coefficients and the window filter are compiled too (stop 33). On an iteration of a
 late depth-prior three_ledges cycle (16 chains, 7760 primitives of 1691 pairs on 61 edges;
@@ -39,7 +39,7 @@ import numba
 import numpy as np
 
 from .intervals import ROOT_MIN_TIME, TRIG_TO_POLY, trig_to_quartic
-from .roots import quadratic, quadratic_batch, quartic, quartic_batch
+from .roots import quadratic, quartic
 
 # power -> Bernstein coefficients on [0, 1] of a quartic: b_i = sum_l C(i,l)/C(4,l) c_l
 POWER_TO_BERNSTEIN = np.array(
@@ -335,8 +335,8 @@ def tables(weights, lin_edge, g_mean, psign, quad_edge) -> tuple:
 
 
 def warm_up() -> None:
-    """Compile ``window_exits`` for the HMC loop's argument types and the batched root solvers
-    (``roots``; the line scans': ``descent_scan.warm_up``), or load them from the cache
+    """Compile ``window_exits`` for the HMC loop's argument types (the line scans' kernels:
+    ``descent_scan.warm_up``), or load it from the cache
     (``__pycache__`` next to this file, else numba's user-wide cache): the first call after an
     installation compiles for ~10 s, later processes load it in well under a second. The
     inference node calls this at start-up, so that its first posterior is not the one that
@@ -350,5 +350,3 @@ def warm_up() -> None:
         trig_to_quartic(0.05),
         structure(np.zeros((1, 1)), np.zeros(1), np.ones(1), np.zeros(1), False),
     )
-    quadratic_batch(np.ones(1), np.zeros(1), -np.ones(1))
-    quartic_batch(np.ones((1, 5)), np.zeros(1), np.ones(1))

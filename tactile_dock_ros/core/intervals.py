@@ -234,7 +234,8 @@ def sample_truncated_normal(
     mean = np.asarray(mean, float)[:, None]
     std = np.asarray(std, float)[:, None]
     a, b = (edges[:, :-1] - mean) / std, (edges[:, 1:] - mean) / std
-    logm = np.full(ok.shape, -np.inf)
+    ok = np.broadcast_to(np.asarray(ok, dtype=bool), a.shape)
+    logm = np.full(a.shape, -np.inf)
     logm[ok] = normal_log_mass(a[ok], b[ok])  # only where asked: descents keep <= 33 of ~1000
     if log_weight is not None:
         logm = logm + log_weight
