@@ -61,13 +61,10 @@ class HistoryConstraints(_TrigSystem):
         self.n_prims = len(self.prim_pair)
         self._prim_index = np.full((self.n_pairs, 6), -1)
         self._prim_index[self.prim_pair, self.prim_slot] = np.arange(self.n_prims)
-        self.pair_prims = self._prim_index  # (P, 6) primitive of each slot, -1 inactive
-        self.pair_observation = pairs[:, 0]  # (P,) sorted
-        self.pair_free = self.structure.free_pair  # (P,) pairs of free observations
-        self.contact_observations = np.flatnonzero(~self.structure.free_obs)
-        # for the compiled window-exit search (``hmc_exit.window_exits``)
+        # for the compiled kernels (``hmc_exit.window_exits``, ``descent_scan``): each pair's
+        # primitive per slot (-1 inactive), its observation (sorted), free pairs, contacts
         self.exit_structure = hmc_exit.structure(
-            self.pair_prims, self.pair_observation, self.pair_free, ~self.structure.free_obs, False
+            self._prim_index, pairs[:, 0], self.structure.free_pair, ~self.structure.free_obs, False
         )
         # flat per-primitive coefficients (K,), (K, 4), (K,)
         self._psign = self._sign[self.prim_pair, self.prim_slot]
@@ -200,13 +197,9 @@ class LinearConstraints(_TrigSystem):
         self.n_obs = self.n_prims
         self.linear = np.ones(self.n_prims, dtype=bool)
         self.n_pairs = self.n_prims  # each inequality is its own pair and observation
-        self.prim_pair = np.arange(self.n_prims)
-        self.pair_prims = self.prim_pair[:, None]
-        self.pair_observation = self.prim_pair  # each violated iff its value is > 0, as a
-        self.pair_free = np.ones(self.n_prims, dtype=bool)  # free observation's pair
-        self.contact_observations = np.zeros(0, dtype=int)
-        self.exit_structure = hmc_exit.structure(  # plain: violated where the value is > 0
-            self.pair_prims, self.pair_observation, self.pair_free, np.zeros(self.n_obs), True
+        each = np.arange(self.n_prims)  # its own pair and observation, free: violated where > 0
+        self.exit_structure = hmc_exit.structure(
+            each[:, None], each, np.ones(self.n_prims), np.zeros(self.n_obs), True
         )
         k = self.n_prims  # k1 = F_k . z: one "edge" per primitive, no quadratic term
         self.window_tables = hmc_exit.tables(
