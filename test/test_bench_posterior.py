@@ -1,4 +1,5 @@
-"""bench posterior: an episode's HMC posteriors beside SMC references, end to end."""
+"""bench posterior: an episode's HMC posteriors beside SMC or rejection references, end to
+end."""
 
 import json
 
@@ -19,7 +20,8 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
     report = json.loads(out.read_text())
     assert report["outcome"] == "gave_up" and report["particles"] == 200
     dock, give_up = report["cycles"]
-    assert dock["history_rows"] > 0 and min(dock["smc_stages"]) >= 2
+    assert report["reference"] == "smc"
+    assert dock["history_rows"] > 0 and min(dock["reference_stages"]) >= 2
     assert dock["plan"] == "dock" and 0 <= dock["plan_docks_on"]["reference"] <= 1
     assert give_up["plan"] == "give_up" and give_up["plan_p_dock"] == 0.0
     assert give_up["plan_docks_on"] == {"hmc": None, "reference": None}  # no path to score
@@ -39,6 +41,31 @@ def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_pa
         assert len(set(runs["mean_error_max_each"])) == 3  # independent runs, not one repeated
 
 
+def test_a_rejection_reference_is_exact_and_a_history_it_cannot_afford_is_skipped(tmp_path):
+    """--reference rejection: the cycle's samples and two more runs against prior draws that
+    fit the history (exact draws: no tempering stage, the log evidence is the log acceptance
+    rate); asked for more draws than the budget can accept, the cycle is skipped with the
+    reason, and the run goes on."""
+    out = tmp_path / "posterior.json"
+    argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
+    argv += ["--max-cycles", "3", "--cycles", "1", "--particles", "200", "--sampler-runs", "2"]
+    argv += ["--reference", "rejection", "--json", str(out)]
+    assert bench.main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["reference"] == "rejection"
+    (row,) = report["cycles"]
+    assert row["reference_stages"] == [0, 0]
+    assert all(-10 < e < 0 for e in row["log_evidence"])  # some prior draws fit, not all
+    assert abs(row["log_evidence"][0] - row["log_evidence"][1]) < 0.5
+    assert row["mean_error_max"] < 3 * row["iid_mean_error_max"]
+    assert row["reference_runs_mean_error_max"] < 1
+    assert max(row["sampler_runs"]["mean_error_max_each"]) < 3 * row["iid_mean_error_max"]
+    assert bench.main([*argv, "--particles", "1000", "--rejection-draws", "1000"]) == 0
+    (skipped,) = json.loads(out.read_text())["cycles"]
+    assert skipped["cycle"] == 1 and skipped["history_rows"] == row["history_rows"]
+    assert "rejection accepted" in skipped["skipped"] and "mean_error_max" not in skipped
+
+
 def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
     argv = ["posterior", "--problem", "sloper", "--prior", "problem", "--max-cycles", "1"]
     with pytest.raises(SystemExit, match=r"cycles \[5\] not in this episode"):
@@ -47,6 +74,10 @@ def test_a_cycle_the_episode_did_not_reach_and_too_few_particles_are_errors():
         bench.main([*argv, "--particles", "100", "--samples", "200"])
     with pytest.raises(SystemExit):  # argparse: one run has no spread to measure
         bench.main([*argv, "--references", "1"])
+    with pytest.raises(SystemExit):  # argparse: no such reference, a budget below 1000 draws
+        bench.main([*argv, "--reference", "mcmc"])
+    with pytest.raises(SystemExit):
+        bench.main([*argv, "--reference", "rejection", "--rejection-draws", "999"])
     with pytest.raises(SystemExit):  # argparse: rejection may return too few draws to score
         bench.main([*argv, "--sampler-runs", "2", "--sampler-method", "rejection"])
 

@@ -408,9 +408,11 @@ def test_descent_seeds_stay_near_the_posterior(problem2_reference):
 
 
 def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch, caplog):
-    """Warm-start 4 of 20 chains in a pocket: without re-seeding the diagnostic flags them,
-    warns and the means are off; with it they are re-seeded and the means are right."""
+    """Warm-start 4 of 20 chains in a pocket (no exact seeds, as on a long history): without
+    re-seeding the diagnostic flags them, warns and the means are off; with it they are
+    re-seeded and the means are right."""
     problem, history, mean, std = problem2_reference
+    monkeypatch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
     pocket = _pocket_state(problem, history, mean, std)
     good = sample_posterior(problem.prior, history, 16, np.random.default_rng(1), "rejection").z
     init = np.vstack([good, np.tile(pocket, (4, 1))])
@@ -440,7 +442,7 @@ def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch
 
 @pytest.mark.parametrize("in_pocket", [10, 14])
 def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
-    problem2_reference, in_pocket, caplog
+    problem2_reference, in_pocket, caplog, monkeypatch
 ):
     """Warm-start 14 (10) of 20 chains in a pocket. 14: the 6 others are the ones
     ``trapped_chains`` names (away from the median chain) but they hold the posterior's mass
@@ -448,8 +450,10 @@ def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
     into the pocket and every chain ended there. 10: no chain is named (the robust std spans
     both groups), split R-hat is far above its limit (5.9 before stop 32, with only a
     warning), and the split (``chain_groups``) is judged by mass. Either way the pocket's
-    chains are re-seeded from the others and the means are right."""
+    chains are re-seeded from the others and the means are right (no exact seeds, as on a
+    long history)."""
     problem, history, mean, std = problem2_reference
+    monkeypatch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
     pocket = _pocket_state(problem, history, mean, std)
     good = sample_posterior(
         problem.prior, history, 20 - in_pocket, np.random.default_rng(1), "rejection"
@@ -463,6 +467,48 @@ def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
     assert out.convergence.converged
     assert "find far less posterior mass" in caplog.text
     assert _mean_error(out, mean, std) < MEAN_TOL
+
+
+def test_exact_seeds_come_before_warm_rows_that_sit_in_one_region(problem2_reference):
+    """A warm start whose rows all sit in one pocket of problem 2 (as rows of a previous
+    posterior whose chains could not leave a region): prior draws that fit the history, as
+    many as the seeding budget finds (9 of 16 here), seed chains first; the chains seeded in
+    the pocket are then the minority that the check after the run re-seeds, and the means are
+    right. With the warm rows alone (exact seeding off) every chain stays in the pocket."""
+    problem, history, mean, std = problem2_reference
+    init = np.tile(_pocket_state(problem, history, mean, std), (16, 1))
+
+    def run():
+        return sample_posterior(
+            problem.prior, history, 400, np.random.default_rng(4), chains=16, init_z=init
+        )
+
+    out = run()
+    assert out.info["exact_seeds"] > 8 and out.info["warm_seeds"] == 16 - out.info["exact_seeds"]
+    assert out.info["burn_in"] == 1  # every chain starts from a row that fits the history
+    assert _mean_error(out, mean, std) < MEAN_TOL
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
+        stuck = run()
+    assert stuck.info["exact_seeds"] == 0 and stuck.info["warm_seeds"] == 16
+    assert _mean_error(stuck, mean, std) > 1.0
+
+
+def test_exact_seeds_short_of_the_chains_are_topped_up_with_warm_rows(problem2_reference):
+    """Exact seeds that do not fill the chains come first, the warm rows seed the rest, and
+    only the exact ones are marked exact (never re-seeded)."""
+    problem, history = problem2_reference[:2]
+    warm = sample_posterior(problem.prior, history, 30, np.random.default_rng(5), "rejection").z
+    exact = sample_posterior(problem.prior, history, 5, np.random.default_rng(6), "rejection").z
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sampling, "_exact_seeds", lambda *_: (exact, 0))
+        seeds = sampling._seed(
+            problem.prior, history, np.random.default_rng(7), 16, 1e-4, 8, 60, init_z=warm
+        )
+    np.testing.assert_array_equal(seeds.z[:5], exact)
+    assert seeds.exact.tolist() == [True] * 5 + [False] * 11
+    assert seeds.warm == 11 and seeds.distinct == 16
+    assert all(any(np.array_equal(row, w) for w in warm) for row in seeds.z[5:])
 
 
 def test_the_chains_re_seeded_are_those_with_less_mass_never_exact_ones():

@@ -1,11 +1,14 @@
 """The episode's posterior against a reference: HMC samples of each cycle of one docking
-episode beside an SMC reference posterior of the same history (``core.reference``: tempered
-SMC with elliptical slice moves, nothing shared with the HMC seeding), ``--references``
-independent runs pooled.
+episode beside a reference posterior of the same history, ``--references`` independent runs
+pooled: ``--reference smc`` (default; ``core.reference``: tempered SMC with elliptical slice
+moves, nothing shared with the HMC seeding) or ``--reference rejection`` (prior draws that
+satisfy the history: exact i.i.d. posterior draws, for short histories only - a cycle whose
+runs accept fewer than ``--particles`` of ``--rejection-draws`` prior draws is skipped and
+reported as such).
 
 Per cycle: the largest and median standardized error of the HMC vertex means (in reference
 standard deviations; beside it the same statistic for as many pooled reference draws, the
-noise floor of independent draws, and the largest one between the SMC runs' means, the
+noise floor of independent draws, and the largest one between the reference runs' means, the
 reference's own noise), the share of samples a recorded slide leaves (``slides``), how
 often the cycle's plan docks on the HMC samples and on the reference ones, and what the planner
 decides on sample sets of the same size drawn from the reference (give-ups, P_dock): whether
@@ -14,9 +17,9 @@ the episode continues or gives up because of the posterior or because of the sam
 ``--sampler-runs K`` adds K more runs of each checked cycle by ``--sampler-method`` (default
 hmc; independent seeds; ``--sampler-start warm``: from the previous cycle's samples as the loop
 does, ``cold``: from the sampler's own seeding): the max error of each run alone, and of the K
-runs pooled (max, median, spread ratio) against the pooled reference and each SMC run.
+runs pooled (max, median, spread ratio) against the pooled reference and each reference run.
 Decision: a sampler's bias is what stays when pooling removes its noise; it is shown only if
-the pooled runs lie farther from the SMC runs than those lie from each other
+the pooled runs lie farther from the reference runs than those lie from each other
 (``reference_runs_mean_error_max``), the reference's own resolution.
 
 Example: ``python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance
@@ -64,13 +67,26 @@ def add_arguments(parser) -> None:
         "--cycles", type=int, nargs="+", help="cycles to check, from 0 (default: all)"
     )
     parser.add_argument(
-        "--particles", type=_at_least(100), default=1000, help="SMC particles per cycle"
+        "--particles", type=_at_least(100), default=1000, help="reference draws per run and cycle"
     )
     parser.add_argument(
         "--references",
         type=_at_least(2),
         default=2,
-        help="independent SMC runs per cycle, pooled (their spread is the reference's own noise)",
+        help="independent reference runs per cycle, pooled (their spread is its own noise)",
+    )
+    parser.add_argument(
+        "--reference",
+        default="smc",
+        choices=("smc", "rejection"),
+        help="reference posterior: tempered SMC, or rejection (exact; short histories only)",
+    )
+    parser.add_argument(
+        "--rejection-draws",
+        type=_at_least(1000),
+        default=2_000_000,
+        help="prior draws per rejection reference run at most (a cycle whose runs accept "
+        "fewer than --particles is skipped)",
     )
     parser.add_argument(
         "--sampler-runs",
@@ -138,7 +154,7 @@ def _repeats(
 def _repeat_errors(
     runs: list[sampling.PosteriorSamples], each: list[np.ndarray], ref_v: np.ndarray
 ) -> dict:
-    """Scores of more sampler runs against the pooled reference ``ref_v`` and each SMC run of
+    """Scores of more sampler runs against the pooled reference ``ref_v`` and each reference run of
     ``each``: every run alone (with whether it warned and how it re-seeded), and all pooled."""
     repeats = [run.vertices for run in runs]
     pooled = np.concatenate(repeats)
@@ -159,17 +175,55 @@ def _repeat_errors(
     }
 
 
-def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repeats=()) -> dict:
-    """One cycle: its HMC samples against ``runs`` SMC references of the same (kept) history,
+class TooFewAccepted(Exception):
+    """A rejection reference run accepted fewer prior draws than the particles asked for."""
+
+
+def rejection_reference(
+    shape, history, particles: int, rng, max_draws: int
+) -> reference.ReferencePosterior:
+    """``particles`` exact posterior draws: prior draws that satisfy every row of ``history``
+    (``sampling``'s rejection method, at most ``max_draws`` tried), as a ReferencePosterior
+    (log evidence: the log acceptance rate; no tempering stages). Raises TooFewAccepted when
+    fewer are accepted: the history is too unlikely under the prior for an exact reference."""
+    post = sampling.sample_posterior(
+        shape, history, particles, rng, "rejection", max_draws=max_draws
+    )
+    if len(post.z) < particles:
+        raise TooFewAccepted(
+            f"rejection accepted {len(post.z)} of {post.info['draws']} prior draws, fewer than "
+            f"the {particles} particles asked for"
+        )
+    acceptance = post.info.get("acceptance", 1.0)  # an empty history accepts every draw
+    return reference.ReferencePosterior(post.z, float(np.log(acceptance)), 0)
+
+
+def compare(
+    view: explore.CycleView,
+    shape,
+    particles: int,
+    runs: int,
+    rng,
+    repeats=(),
+    rejection_draws: int | None = None,
+) -> dict:
+    """One cycle: its HMC samples against ``runs`` reference runs of the same (kept) history,
     pooled; how far the runs' means lie apart says how far the reference itself can be
-    trusted (at late depth-prior cycles two 1000-particle runs differed by up to 0.7 std in a
-    vertex mean: far more than independent draws would). ``repeats``: more sampler runs
-    (``_repeats``), scored alone and pooled."""
+    trusted (at late depth-prior cycles two 1000-particle SMC runs differed by up to 0.7 std
+    in a vertex mean: far more than independent draws would). The runs are SMC, or with
+    ``rejection_draws`` ``rejection_reference`` runs (raises TooFewAccepted). ``repeats``:
+    more sampler runs (``_repeats``), scored alone and pooled."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
     start = time.perf_counter()
     history = state.history.subset(kept)
-    refs = [reference.smc_posterior(shape, history, particles, rng) for _ in range(runs)]
+    if rejection_draws is None:
+        refs = [reference.smc_posterior(shape, history, particles, rng) for _ in range(runs)]
+    else:
+        refs = [
+            rejection_reference(shape, history, particles, rng, rejection_draws)
+            for _ in range(runs)
+        ]
     seconds = time.perf_counter() - start
     each = [shape.vertices(r.z) for r in refs]
     ref_v = np.concatenate(each)
@@ -190,8 +244,8 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repe
         "cycle": view.cycle,
         "history_rows": len(kept),
         "dropped_rows": len(state.dropped),
-        "smc_seconds": seconds,
-        "smc_stages": [r.stages for r in refs],
+        "reference_seconds": seconds,
+        "reference_stages": [r.stages for r in refs],
         "log_evidence": [r.log_evidence for r in refs],
         "mean_error_max": float(errors.max()),
         "mean_error_median": float(np.median(errors)),
@@ -220,7 +274,7 @@ def compare(view: explore.CycleView, shape, particles: int, runs: int, rng, repe
 
 
 HEADER = (
-    f"{'cycle':>5} {'rows':>4} {'smc s':>6} {'logP(H)':>7} {'err max':>7} {'iid':>5} "
+    f"{'cycle':>5} {'rows':>4} {'ref s':>6} {'logP(H)':>7} {'err max':>7} {'iid':>5} "
     f"{'runs':>5} {'med':>5} {'slide-ok hmc/ref':>16} {'plan P_dock':>11} {'docks hmc/ref':>13} "
     f"{'ref plans: give-ups, med P_dock':>31}"
 )
@@ -233,7 +287,7 @@ def _share(value: float | None) -> str:
 def _line(row: dict) -> str:
     ok, docks, plans = row["slide_consistent"], row["plan_docks_on"], row["reference_plans"]
     return (
-        f"{row['cycle']:>5} {row['history_rows']:>4} {row['smc_seconds']:>6.0f} "
+        f"{row['cycle']:>5} {row['history_rows']:>4} {row['reference_seconds']:>6.0f} "
         f"{np.mean(row['log_evidence']):>7.1f} {row['mean_error_max']:>7.2f} "
         f"{row['iid_mean_error_max']:>5.2f} {row['reference_runs_mean_error_max']:>5.2f} "
         f"{row['mean_error_median']:>5.2f} "
@@ -256,7 +310,7 @@ def _repeat_line(row: dict) -> str:
         f"{sum(r > 0 for r in runs['mass_rounds_each'])} by posterior mass); "
         f"pooled max {runs['pooled_mean_error_max']:.2f} median "
         f"{runs['pooled_mean_error_median']:.2f} std ratio {runs['pooled_std_ratio_median']:.2f}, "
-        f"to each SMC run {to_refs} (SMC runs apart {row['reference_runs_mean_error_max']:.2f})"
+        f"to each reference run {to_refs} (runs apart {row['reference_runs_mean_error_max']:.2f})"
     )
 
 
@@ -294,12 +348,13 @@ def run(args) -> dict:
     unknown = sorted(set(wanted) - set(range(len(views))))
     if unknown:
         raise SystemExit(f"cycles {unknown} not in this episode (0..{len(views) - 1})")
+    rejection_draws = args.rejection_draws if args.reference == "rejection" else None
     print(HEADER)
     rows = []
     for cycle in wanted:
         rows_now = len(views[cycle].state.history)
         print(
-            f"  cycle {cycle}: {args.references} SMC runs of {particles} particles, "
+            f"  cycle {cycle}: {args.references} {args.reference} runs of {particles} draws, "
             f"{rows_now} rows ...",
             flush=True,
         )
@@ -309,7 +364,16 @@ def run(args) -> dict:
         repeats = _repeats(
             views[cycle], shape, warm, args.sampler_runs, args.sampler_method, repeat_rng
         )
-        rows.append(compare(views[cycle], shape, particles, args.references, rng, repeats))
+        try:
+            rows.append(
+                compare(
+                    views[cycle], shape, particles, args.references, rng, repeats, rejection_draws
+                )
+            )
+        except TooFewAccepted as err:
+            rows.append({"cycle": cycle, "history_rows": rows_now, "skipped": str(err)})
+            print(f"  cycle {cycle} skipped: {err} (too long a history for --reference rejection)")
+            continue
         print(_line(rows[-1]), flush=True)
         if repeats:
             print(_repeat_line(rows[-1]), flush=True)
@@ -323,6 +387,7 @@ def run(args) -> dict:
         "outcome": result.outcome,
         "p_dock": [c.plan.p_dock for c in result.cycles_log],
         "rhat": [c.convergence.rhat for c in result.cycles_log],
+        "reference": args.reference,
         "particles": particles,
         "references": args.references,
         "samples": args.samples,
