@@ -943,10 +943,11 @@ def sample_posterior(
     sampling there, dropping the same row each time.
 
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
-    observations, seeds the chains: its rows consistent with the history (the previous
-    posterior filtered by the new observations, i.e. already draws of the new one) are used
-    directly, and when there are at least ``chains`` distinct ones the default burn-in drops
-    to 1 move (HMC, Gibbs) / 50 steps (MH); otherwise descent starts from its rows.
+    observations, seeds the chains that exact seeds leave (``_seed``): its rows consistent with
+    the history (the previous posterior filtered by the new observations, i.e. already draws
+    of the new one) are used directly, and when the chains with exact seeds and the warm rows
+    used are at least ``chains`` the default burn-in drops to 1 move (HMC, Gibbs) / 50 steps
+    (MH); otherwise descent starts from its rows.
     """
     start = time.perf_counter()
     if method not in METHODS:
