@@ -352,7 +352,8 @@ def run(args) -> dict:
     print(HEADER)
     rows = []
     for cycle in wanted:
-        rows_now = len(views[cycle].state.history)
+        state = views[cycle].state
+        rows_now = len(state.history) - len(state.dropped)  # kept rows, as ``compare`` counts
         print(
             f"  cycle {cycle}: {args.references} {args.reference} runs of {particles} draws, "
             f"{rows_now} rows ...",
