@@ -6,8 +6,10 @@ from __future__ import annotations
 import faulthandler
 import importlib
 import inspect
+import os
 import signal
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -15,6 +17,8 @@ from collections.abc import Callable
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from std_msgs.msg import Header
 
 from tactile_dock_ros.execution.types import PlaneFrame
@@ -147,24 +151,60 @@ def dump_stacks_on_signal() -> None:
         faulthandler.register(STACK_DUMP_SIGNAL, file=sys.stderr, all_threads=True)
 
 
-def stop_cleanly_on_sigint() -> None:
-    """Make the first SIGINT shut the node down between callbacks, a second one at once.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+SHUTDOWN_HOOK = "on_shutdown"  # a node's method run by ``run`` as it exits, context still valid
 
-    Call before ``rclpy.init``: rclpy's handler, which shuts the context down and wakes the
-    executor, then chains to this one. Decision: Python's default handler raised
-    KeyboardInterrupt wherever the main thread was, also half-way through an rclpy ``Task``'s
-    constructor; the half-built task's ``__del__`` then printed a traceback into the node log
-    (the fuzz check counts tracebacks: a red CI). A node busy in a long
-    callback (a sampler) finishes it first; a second SIGINT (``bringup.stop`` sends SIGKILL
-    after its timeout) interrupts it."""
-    received = []
 
-    def on_sigint(signum, frame) -> None:
-        received.append(signum)
-        if len(received) > 1:
+class StopSignals:
+    """The first SIGINT or SIGTERM completes ``future`` and wakes ``executor`` at once, a second
+    one raises KeyboardInterrupt in the main thread.
+
+    Install before ``rclpy.init(signal_handler_options=NO)``. Decision: rclpy's own handlers shut
+    the context down inside the signal, so nothing can be published afterwards: the executor
+    node could not stop the arm on SIGTERM (``ros2 launch`` sends it to a node that ignores
+    SIGINT; systemd and docker send it first). Here the context stays valid until ``run`` has
+    called the node's ``on_shutdown``. Python runs a signal handler only between bytecodes of
+    the main thread, which waits inside rcl: the C-level handler's wakeup fd lets a helper
+    thread wake the executor. Python's default SIGINT handler raised KeyboardInterrupt wherever
+    the main thread was, also half-way through an rclpy ``Task``'s constructor, whose
+    ``__del__`` then printed a traceback into the node log (the fuzz check counts tracebacks);
+    so the first signal only asks, and a node busy in a long callback (a sampler) finishes it;
+    a second signal (``bringup.stop`` sends SIGKILL after its timeout) interrupts it."""
+
+    def __init__(self) -> None:
+        self.future: Future = Future()
+        self.executor: Executor | None = None
+        self.received: list[int] = []
+        read_fd, write_fd = os.pipe()
+        os.set_blocking(write_fd, False)
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, self._on_signal)
+        signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        threading.Thread(target=self._watch, args=(read_fd,), name="stop", daemon=True).start()
+
+    def _on_signal(self, signum, frame) -> None:
+        self.received.append(signum)
+        if len(self.received) > 1:
             raise KeyboardInterrupt
 
-    signal.signal(signal.SIGINT, on_sigint)
+    def _watch(self, read_fd: int) -> None:
+        while not self.future.done():
+            if set(os.read(read_fd, 64)) & set(STOP_SIGNALS):
+                self.future.set_result(True)
+                if self.executor is not None:
+                    self.executor.wake()
+
+
+def run_shutdown_hook(node: Node) -> None:
+    """Call ``node.on_shutdown()`` if the node defines it and its context is still valid (an
+    exception in it is logged: the node is going away regardless)."""
+    hook = getattr(node, SHUTDOWN_HOOK, None)
+    if not callable(hook) or not node.context.ok():
+        return
+    try:
+        hook()
+    except Exception as err:  # the exit path must go on
+        node.get_logger().error(f"{SHUTDOWN_HOOK} failed: {err!r}")
 
 
 def run(
@@ -172,28 +212,35 @@ def run(
     args: list[str] | None = None,
     executor: Callable[[], Executor] = SingleThreadedExecutor,
 ) -> int:
-    """Console entry point: init, spin with ``executor()`` until shutdown, clean up; parameter
-    errors exit 2. SIGUSR1 prints every thread's Python stack to stderr and the node goes on
-    (``dump_stacks_on_signal``); SIGINT stops it between callbacks (``stop_cleanly_on_sigint``)."""
+    """Console entry point: init, spin with ``executor()`` until SIGINT or SIGTERM
+    (``StopSignals``), then call the node's ``on_shutdown`` if it has one (after the executor
+    stopped, so nothing the node publishes follows it; also when a callback raised), clean up;
+    parameter errors exit 2. SIGUSR1 prints every thread's Python stack to stderr and the node
+    goes on (``dump_stacks_on_signal``)."""
     dump_stacks_on_signal()
-    stop_cleanly_on_sigint()
-    rclpy.init(args=args)
-    node = None
+    stop = StopSignals()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = spinner = None
     try:
         node = node_class()
-        rclpy.spin(node, executor=executor())
+        spinner = stop.executor = executor()
+        spinner.add_node(node)
+        spinner.spin_until_future_complete(stop.future)
     except ValueError as err:  # invalid parameters: say which and stop
         print(f"{node_class.__name__}: {err}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RuntimeError:
-        # SIGINT while rclpy converted a message surfaces as this (seen under fuzzing): the
-        # shutdown, once the signal has shut the context down; anything else is a fault.
+        # A message rclpy was converting when the context shut down surfaces as this (seen
+        # under fuzzing): the shutdown; anything else is a fault.
         if rclpy.ok():
             raise
     finally:
+        if spinner is not None:
+            spinner.shutdown()
         if node is not None:
+            run_shutdown_hook(node)
             dropped = getattr(node, "malformed", None)
             if dropped is not None and dropped.dropped:
                 counts = ", ".join(f"{t} {n}" for t, n in sorted(dropped.dropped.items()))

@@ -89,7 +89,8 @@ def _with_state(arguments: dict[str, str], log_dir: Path) -> dict[str, str]:
 
 
 def stop(processes: Iterable[subprocess.Popen], timeout_s: float = 10.0) -> None:
-    """SIGINT (rclpy shuts down cleanly), then SIGKILL whatever is still running."""
+    """SIGINT (a node stops between callbacks: ``common.StopSignals``), then SIGKILL whatever
+    is still running."""
     processes = list(processes)
     for p in processes:
         if p.poll() is None:
