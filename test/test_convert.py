@@ -1,5 +1,7 @@
 """Message <-> numpy/core conversion: exact round trips and clear errors on malformed input."""
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -266,3 +268,31 @@ def test_hardware_messages_round_trip_and_frames_are_checked():
     pose.pose.orientation.x, pose.pose.orientation.w = 0.0, 0.0
     pose.pose.orientation.z = 1.0  # half a turn about z
     np.testing.assert_allclose(convert.pose_rotation(pose) @ [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("value", [1e300, -1e7, 1e150])
+def test_absurd_poses_wrenches_and_samples_are_refused(value):
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+
+    pose = PoseStamped()
+    pose.pose.orientation.w = 1.0
+    pose.pose.position.y = value
+    with pytest.raises(MessageError, match=r"pose\.position has a value beyond"):
+        convert.pose_position(pose, _vertical_plane())
+    for field, name in (("force", "wrench.force"), ("torque", "wrench.torque")):
+        wrench = WrenchStamped()
+        getattr(wrench.wrench, field).x = value
+        with pytest.raises(MessageError, match=rf"{re.escape(name)} has a value beyond"):
+            convert.wrench_force(wrench)
+    samples = convert.samples_to_msg(np.full((2, 3, 2), value), HEADER, "hmc", 1.0, 0)
+    with pytest.raises(MessageError, match="samples has a value beyond"):
+        convert.samples_from_msg(samples)
+
+
+def test_poses_and_wrenches_within_the_bounds_pass():
+    header = convert.Header(frame_id="base_link")
+    edge = np.array([validate.MAX_COORDINATE_M, 0.0, -validate.MAX_COORDINATE_M])
+    pose = convert.pose_to_msg(edge, header)
+    assert np.all(np.isfinite(convert.pose_position(pose, _vertical_plane())))
+    force = np.array([validate.MAX_FORCE_N, -validate.MAX_FORCE_N, 0.0])
+    np.testing.assert_array_equal(convert.wrench_force(convert.wrench_to_msg(force, header)), force)

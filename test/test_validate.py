@@ -242,3 +242,39 @@ def test_every_node_subscribes_through_the_guard():
     assert direct == []
     uses = sum(len(re.findall(r"\bsubscribe\(", p.read_text())) for p in nodes.glob("*_node.py"))
     assert uses >= 5
+
+
+def _prior(n=50, m=6, seed=0):
+    from tactile_dock_ros.core.shape import GaussianShape
+
+    rng = np.random.default_rng(seed)
+    return GaussianShape(rng.normal(size=2 * n), 0.01 * rng.normal(size=(2 * n, m)), False, 0.5)
+
+
+def test_samples_drawn_from_the_prior_fit_it_others_are_refused():
+    prior = _prior()
+    rng = np.random.default_rng(1)
+    drawn = prior.vertices(5.0 * rng.standard_normal((200, prior.n_basis)))  # far tails too
+    validate.samples_fit_prior(drawn, prior.n_vertices, prior.mean, prior.basis)
+    validate.samples_fit_prior(None, prior.n_vertices, prior.mean, prior.basis)  # empty set
+    with pytest.raises(MessageError, match="samples have 3 vertices, the prior has 50"):
+        validate.samples_fit_prior(drawn[:, :3], 3, prior.mean, prior.basis)
+    with pytest.raises(MessageError, match="samples have 3 vertices"):
+        validate.samples_fit_prior(None, 3, prior.mean, prior.basis)
+    huge = prior.mean.reshape(1, -1, 2) * 1e150
+    with pytest.raises(MessageError, match="from the prior mean, beyond 100 prior std"):
+        validate.samples_fit_prior(huge, prior.n_vertices, prior.mean, prior.basis)
+    moved = drawn.copy()
+    std = np.linalg.norm(prior.basis, axis=1).reshape(-1, 2)
+    moved[7, 4, 1] = prior.mean.reshape(-1, 2)[4, 1] + 101 * std[4, 1] + 2e-3
+    with pytest.raises(MessageError, match="sample 7 coordinate 9 "):
+        validate.samples_fit_prior(moved, prior.n_vertices, prior.mean, prior.basis)
+
+
+def test_a_prior_without_spread_admits_its_mean_within_the_slack():
+    prior = _prior(n=4, m=0)
+    at_mean = prior.mean.reshape(1, 4, 2) + 0.5 * validate.SAMPLE_PRIOR_SLACK_M
+    validate.samples_fit_prior(at_mean, 4, prior.mean, prior.basis)
+    with pytest.raises(MessageError):
+        validate.samples_fit_prior(at_mean + validate.SAMPLE_PRIOR_SLACK_M, 4, prior.mean,
+                                   prior.basis)  # fmt: skip

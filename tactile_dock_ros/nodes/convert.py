@@ -75,11 +75,13 @@ def _point(xy) -> Point:
 
 
 def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
-    """geometry_msgs/PoseStamped (base frame) -> tool position in the plane (2,) metres; the
-    orientation must be a unit quaternion even where it is not used."""
+    """geometry_msgs/PoseStamped (base frame) -> tool position in the plane (2,) metres, each
+    base coordinate within ``validate.MAX_COORDINATE_M``; the orientation must be a unit
+    quaternion even where it is not used."""
     pose_rotation(msg)
     p = msg.pose.position
-    return plane.point_to_plane(finite("pose.position", [p.x, p.y, p.z]))
+    position = validate.within("pose.position", [p.x, p.y, p.z], validate.MAX_COORDINATE_M, "m")
+    return plane.point_to_plane(position)
 
 
 def pose_rotation(msg) -> np.ndarray:
@@ -92,12 +94,12 @@ def pose_rotation(msg) -> np.ndarray:
 
 
 def wrench_force(msg) -> np.ndarray:
-    """geometry_msgs/WrenchStamped -> force (3,) newtons in the message's frame (the torque,
-    unused, must be finite too)."""
+    """geometry_msgs/WrenchStamped -> force (3,) newtons in the message's frame; every force
+    and torque component (the torque is unused) within ``validate.MAX_FORCE_N``."""
     t = msg.wrench.torque
-    finite("wrench.torque", [t.x, t.y, t.z])
+    validate.within("wrench.torque", [t.x, t.y, t.z], validate.MAX_FORCE_N, "N m")
     f = msg.wrench.force
-    return finite("wrench.force", [f.x, f.y, f.z])
+    return validate.within("wrench.force", [f.x, f.y, f.z], validate.MAX_FORCE_N, "N")
 
 
 def pose_to_msg(position_3: np.ndarray, header: Header) -> PoseStamped:
@@ -235,7 +237,9 @@ def samples_to_msg(
 
 
 def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
-    """ShapeSamples -> (N, n, 2) vertices; sizes must agree and N, n must be positive.
+    """ShapeSamples -> (N, n, 2) vertices; sizes must agree, N, n must be positive and every
+    coordinate within ``validate.MAX_COORDINATE_M`` (the planner also checks them against its
+    prior: ``validate.samples_fit_prior``).
 
     An empty set (num_samples = 0, no samples) is how inference says that no shape is consistent
     with the history; callers check ``msg.num_samples == 0`` before converting.
@@ -252,7 +256,8 @@ def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
     validate.bounded("dropped_segments count", len(msg.dropped_segments), history_length)
     if len(msg.dropped_segments) and max(msg.dropped_segments) >= history_length:
         raise MessageError(f"dropped_segments index beyond history_length {history_length}")
-    return finite("samples", msg.samples).reshape(count, n, 2)
+    samples = validate.within("samples", msg.samples, validate.MAX_COORDINATE_M, "m")
+    return samples.reshape(count, n, 2)
 
 
 # --------------------------------------------------------------------------- plans

@@ -48,7 +48,7 @@ from tactile_dock_ros.msg import (
     ShapeDistribution,
     ShapeSamples,
 )
-from tactile_dock_ros.nodes import convert, journal, qos
+from tactile_dock_ros.nodes import convert, journal, qos, validate
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
     Stopwatch,
@@ -111,6 +111,7 @@ class PlannerNode(Node):
         # history with each row's plan (from contact_history), tool (tool_pose), aim points
         self.episode_state = EpisodeState()
         self.samples = None  # (msg, vertices) of the newest samples
+        self.samples_ahead = None  # newer ones conditioned on rows not yet in contact_history
         self.episode = 0
         self.state = IDLE
         self.awaiting_plan = None  # plan_id being executed
@@ -141,6 +142,14 @@ class PlannerNode(Node):
     def on_prior(self, msg: ShapeDistribution) -> None:
         first = self.prior is None
         self.prior = convert.shape_from_msg(msg)
+        for slot in ("samples", "samples_ahead"):  # kept unchecked until a prior came
+            held = getattr(self, slot)
+            try:
+                if held is not None:
+                    self.check_samples(*held)
+            except convert.MessageError as err:
+                setattr(self, slot, None)
+                self.get_logger().warning(f"samples dropped: {err}")
         if first:
             self.publish_status()  # tells clients that start_episode will be accepted
 
@@ -150,12 +159,33 @@ class PlannerNode(Node):
 
     def on_history(self, msg: ContactHistory) -> None:
         self.episode_state = convert.history_from_msg(msg, self.episode_state)
+        ahead = self.samples_ahead
+        if ahead is not None and ahead[0].history_length <= len(self.episode_state.history):
+            self.samples, self.samples_ahead = ahead, None
         self.maybe_plan()
 
     def on_samples(self, msg: ShapeSamples) -> None:
+        """Keep checked samples (``check_samples``; a refused message changes nothing). Samples
+        conditioned on more rows than the known history wait aside until that history arrives
+        (the two latched topics may arrive in either order, e.g. at a restart): they replace
+        neither the current samples nor are dropped."""
         empty = msg.num_samples == 0 and len(msg.samples) == 0  # inference found no shape
-        self.samples = (msg, None if empty else convert.samples_from_msg(msg))
+        samples = (msg, None if empty else convert.samples_from_msg(msg))
+        self.check_samples(*samples)
+        if msg.history_length > len(self.episode_state.history):
+            self.samples_ahead = samples
+            return
+        self.samples = samples
         self.maybe_plan()
+
+    def check_samples(self, msg: ShapeSamples, vertices) -> None:
+        """MessageError unless the samples fit the prior (``validate.samples_fit_prior``: its
+        vertex count, within 100 prior std of its mean). Before the prior has come they are
+        kept unchecked: ``on_prior`` checks them then, and nothing plans without a prior."""
+        if self.prior is not None:
+            validate.samples_fit_prior(
+                vertices, msg.num_vertices, self.prior.mean, self.prior.basis
+            )
 
     def on_start(self, request, response):
         if self.state == RUNNING:

@@ -1,0 +1,99 @@
+"""ShapeSamples that cannot come from the planner's prior (another vertex count, absurd
+coordinates) are dropped over DDS and change nothing: a running episode goes on and plans on
+the next valid samples (planner in-process, ``node_with_driver``)."""
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped
+from node_helpers import launch_nodes, node_with_driver
+from ros_helpers import spin_until
+from std_srvs.srv import Trigger
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    DockingPlan,
+    EpisodeStatus,
+    ShapeDistribution,
+    ShapeSamples,
+)
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.episode import EpisodeState
+from tactile_dock_ros.nodes import convert, qos
+
+pytestmark = pytest.mark.dds
+
+
+def _pose(x, y, z):
+    msg = PoseStamped()
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    msg.pose.orientation.w = 1.0
+    return msg
+
+
+def test_samples_that_do_not_fit_the_prior_are_dropped_and_the_episode_goes_on(tmp_path):
+    spec = launch_nodes("mock")["planner"]
+    statuses, plans = [], []
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
+        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
+        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        start = driver.create_client(Trigger, "start_episode")
+        publishers = (prior, history, samples, pose)
+        assert spin_until(
+            executor,
+            lambda: (
+                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
+            ),
+            10.0,
+        )
+        shape = problems.get("sloper").prior
+        prior.publish(convert.shape_to_msg(shape, convert.Header()))
+        assert spin_until(executor, lambda: node.prior is not None, 10.0)
+        future = start.call_async(Trigger.Request())
+        assert spin_until(executor, future.done, 10.0) and future.result().success
+        stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
+        history.publish(convert.history_to_msg(EpisodeState(), stamp))
+        assert spin_until(executor, lambda: pose.publish(_pose(0.0, 0.6, 0.45)) or (
+            node.episode_state.tool is not None), 10.0)  # fmt: skip
+
+        # Right after the new history: 3 vertices against the prior's, then the prior mean
+        # times 1e150 (finite, within no bound of the prior).
+        drawn = shape.vertices(np.random.default_rng(0).standard_normal((20, shape.n_basis)))
+        few = convert.samples_to_msg(drawn[:, :3], stamp, "hmc", 5.0, 0)
+        huge = convert.samples_to_msg(drawn * 1e150, stamp, "hmc", 5.0, 0)
+        for dropped, bad in enumerate((few, huge), start=1):
+            samples.publish(bad)
+            assert spin_until(
+                executor, lambda n=dropped: node.malformed.dropped["/shape_samples"] == n, 10.0
+            ), bad.num_vertices
+            assert node.samples is None and node.samples_ahead is None  # nothing kept
+            assert node.state == "RUNNING" and not plans and not node.cycles
+        assert statuses[-1].state == EpisodeStatus.RUNNING
+
+        # The valid samples that follow are planned on (DOCK or GIVE_UP: the draw decides).
+        good = convert.samples_to_msg(drawn, stamp, "hmc", 5.0, 0)
+        samples.publish(good)
+        assert spin_until(executor, lambda: bool(plans), 60.0)
+        assert node.samples[0].num_vertices == shape.n_vertices
+        assert len(node.cycles) == 1
+    assert statuses[-1].state in (EpisodeStatus.RUNNING, EpisodeStatus.GAVE_UP), statuses[-1]
+    assert "planner failed" not in statuses[-1].detail
+
+
+def test_samples_before_the_prior_are_checked_when_it_comes(tmp_path):
+    spec = launch_nodes("mock")["planner"]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
+        publishers = (prior, samples)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in publishers), 10)
+        shape = problems.get("sloper").prior
+        drawn = shape.vertices(np.random.default_rng(1).standard_normal((5, shape.n_basis)))
+        samples.publish(convert.samples_to_msg(drawn[:, :3], convert.Header(), "hmc", 5.0, 0))
+        assert spin_until(executor, lambda: node.samples is not None, 10.0)  # kept unchecked
+        prior.publish(convert.shape_to_msg(shape, convert.Header()))
+        assert spin_until(executor, lambda: node.prior is not None, 10.0)
+        assert node.samples is None  # they do not fit the prior: dropped before any use
