@@ -5,6 +5,8 @@ removed (a ``sitecustomize`` the processes import patches it out) and checks tha
 assertion then fails: the checks see what they claim to see.
 """
 
+import signal
+
 import numpy as np
 import pytest
 
@@ -115,6 +117,18 @@ def test_control_loop_keeps_its_period_under_10x_sensor_rate_and_plan_bursts(tmp
     assert _load_failures(result, env) == [], result
 
 
+def _exit_ok(row) -> bool:
+    return row.get("exit_code") == 0 and row.get("zero_command") and row["moving_after_zero"] == 0
+
+
+def test_sigterm_of_the_executor_mid_move_commands_zero_before_it_exits(tmp_path):
+    with safety.mock_floor(tmp_path, FAST_DIAGNOSTICS) as (probe, env, processes):
+        row = safety.executor_exit(probe, env, processes, signal.SIGTERM, respawn=False)
+    assert _exit_ok(row), row
+    # the arm stopped at once: far less than the mock's command_timeout at 0.2 m/s
+    assert row["distance_m"] is not None and row["distance_m"] < 0.02, row
+
+
 NOT_BUSY = (
     "import tactile_dock_ros.nodes.executor_node as e\ne.ExecutorNode.busy = lambda s: False\n"
 )
@@ -147,6 +161,10 @@ MUTATIONS = {
         NOT_BUSY,
         "load",
     ),
+    "zero command on exit": (
+        "import tactile_dock_ros.nodes.executor_node as e\ndel e.ExecutorNode.on_shutdown\n",
+        "sigterm",
+    ),
     "sensor timeout": (
         "import numpy\nimport tactile_dock_ros.nodes.watchdog as w\n"
         "w.StreamWatch.age = lambda self, now: 0.0 if self.last is not None else numpy.inf\n",
@@ -164,7 +182,11 @@ def test_each_check_fails_when_its_protection_is_removed(removed, tmp_path, monk
         result, env = _load(tmp_path / "run")
         assert _load_failures(result, env), result
         return
-    with safety.mock_floor(tmp_path / "run", FAST_DIAGNOSTICS) as (probe, env, _):
+    with safety.mock_floor(tmp_path / "run", FAST_DIAGNOSTICS) as (probe, env, processes):
+        if scenario == "sigterm":
+            row = safety.executor_exit(probe, env, processes, signal.SIGTERM, respawn=False)
+            assert not _exit_ok(row), row
+            return
         if scenario == "dropout":
             rows = [safety.dropout(probe, env, "wrench", 0.1)]
             assert not _dropout_ok(rows[0], env), rows

@@ -151,3 +151,25 @@ class PointToolSim:
         _, slid, edge = max(slides, key=lambda item: item[0])  # the edge the tool can slide on
         _, blocked = self._hits(hit, slid, skip=edges)  # edges meeting at hit do not block
         self.tool = slid if blocked is None else blocked
+
+
+def limit_command(velocity, position, dt: float, max_speed: float, box_min, box_max):
+    """The arm's own limits on a commanded velocity (2,) m/s at ``position`` (2,) m, as a real
+    driver enforces them whatever its commander sends (ros2_control joint limits, moveit_servo's
+    velocity scaling and position limits): the speed is scaled down to ``max_speed`` (direction
+    kept), then each axis is cut so that one step of ``dt`` s ends inside the box ``box_min`` ..
+    ``box_max``; outside the box, motion further out is zeroed and motion back in is kept.
+    Returns (velocity, reasons it was changed: empty when untouched)."""
+    velocity = np.asarray(velocity, float)
+    position = np.asarray(position, float)
+    reasons = []
+    speed = float(np.linalg.norm(velocity))
+    if speed > max_speed:
+        velocity = velocity * (max_speed / speed)
+        reasons.append(f"speed {speed:.3g} m/s above {max_speed:g}")
+    upper = np.maximum((np.asarray(box_max, float) - position) / dt, 0.0)
+    lower = np.minimum((np.asarray(box_min, float) - position) / dt, 0.0)
+    clipped = np.clip(velocity, lower, upper)
+    if not np.array_equal(clipped, velocity):
+        reasons.append(f"leaving the workspace box at {np.round(position, 3).tolist()}")
+    return clipped, reasons

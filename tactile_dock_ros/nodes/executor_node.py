@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.duration import Duration
 from rclpy.node import Node
 
 from tactile_dock_ros.core.history import History
@@ -360,6 +361,16 @@ class ExecutorNode(Node):
         self.report_pub.publish(convert.report_to_msg(report, header(self, self.p.plane_frame_id)))
         if outcome is Outcome.ABORTED:
             self.get_logger().warning(f"plan {plan.plan_id}: ABORTED: {detail}")
+
+    def on_shutdown(self) -> None:
+        """Command zero as the node exits (``common.run``: SIGINT, SIGTERM, an exception in a
+        callback) and wait up to SHUTDOWN_ACK_S for the arm to acknowledge it: a driver would
+        otherwise go on with the last command until its own timeout."""
+        self.command(np.zeros(2))
+        self.cmd_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
+
+
+SHUTDOWN_ACK_S = 0.5  # exit waits this long at most for the arm to acknowledge the stop
 
 
 def main(args: list[str] | None = None) -> int:

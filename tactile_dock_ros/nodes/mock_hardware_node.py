@@ -1,9 +1,13 @@
 """mock_hardware: simulated arm + F/T sensor on a ground-truth terrain (docs/nodes.md).
 
 Integrates ``cmd_twist`` (TwistStamped, base frame; a command older than ``command_timeout``
-counts as zero) for a point tool against the terrain with ``execution.mock_physics`` at ``rate_hz``
-and publishes ``tool_pose`` (PoseStamped) and ``wrench`` (WrenchStamped, environment force on
-the tool plus a constant bias and Gaussian noise). The terrain is drawn from a benchmark problem
+counts as zero) within the arm's own limits, as a real driver enforces them whatever its
+commander sends (``execution.mock_physics.limit_command``: ``max_speed``, the box
+``workspace_min``/``workspace_max`` in the plane frame like the executor's, a throttled warning
+when a command is clamped), for a point tool against the terrain with
+``execution.mock_physics`` at ``rate_hz`` and publishes ``tool_pose`` (PoseStamped) and
+``wrench`` (WrenchStamped, environment force on the tool plus a constant bias and Gaussian
+noise). The terrain is drawn from a benchmark problem
 with a seed, or read from a YAML file (``vertices: [[x, y], ...]``, ``start: [x, y]``, optional
 ``closed``, ``friction``). ``~/ground_truth`` (ShapeDistribution with no basis, latched) shows
 the truth for RViz, plots and tests; the planner never subscribes to it. With
@@ -28,7 +32,7 @@ from std_srvs.srv import SetBool
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.shape import GaussianShape
-from tactile_dock_ros.execution.mock_physics import PointToolSim
+from tactile_dock_ros.execution.mock_physics import PointToolSim, limit_command
 from tactile_dock_ros.msg import ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import (
@@ -42,6 +46,15 @@ from tactile_dock_ros.nodes.common import (
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.mock_camera import MockCamera
+
+# A command older than this counts as zero: its commander is gone (killed, hung). 2.5 periods
+# of the executor's 100 Hz loop: one late tick does not stop the arm, and the last command of a
+# SIGKILLed executor (0.2 m/s) moves it 5 mm (median of 5, max 6 mm; 39 mm with the former
+# 0.2 s: ``bench safety --parts exit``). On a loaded machine (load average 3 on 2 cores) the
+# executor itself sent nothing for 25-260 ms about once a second (command stamp intervals p99
+# 35-55 ms): the arm pauses then, as a real driver must when its commander is late.
+COMMAND_TIMEOUT_S = 0.025
+LIMIT_LOG_PERIOD_S = 1.0  # seconds between two warnings that the arm clamped a command
 
 PARAMS = [
     *PLANE_TABLE,
@@ -57,7 +70,28 @@ PARAMS = [
     Param("stiffness", 500.0, "arm stiffness along the motion", "N/m", 1.0, 1e6),
     Param("lateral_stiffness", 25.0, "arm stiffness across the motion", "N/m", 0.01, 1e6),
     Param("max_slide_speed", 0.3, "fastest slide along the surface", "m/s", 1e-3, 10.0),
-    Param("command_timeout", 0.2, "a command older than this counts as zero", "s", 0.001, 5.0),
+    Param(
+        "command_timeout",
+        COMMAND_TIMEOUT_S,
+        "a command older than this counts as zero (the commander is gone)",
+        "s",
+        0.001,
+        5.0,
+    ),
+    Param(
+        "max_speed",
+        0.3,
+        "the arm's own speed limit: faster commands are scaled down",
+        "m/s",
+        1e-3,
+        10.0,
+    ),
+    Param(
+        "workspace_min", [-1.1, -1.1], "the arm's own box, lower corner (plane x, y)", "m", length=2
+    ),
+    Param(
+        "workspace_max", [1.1, 1.1], "the arm's own box, upper corner (plane x, y)", "m", length=2
+    ),
     Param("pose_noise", 0.0001, "tool position noise (std per axis)", "m", 0.0, 0.01),
     Param("force_noise", 0.05, "force noise (std per axis)", "N", 0.0, 10.0),
     Param("force_bias", [0.3, -0.2, 0.5], "constant F/T bias in the base frame", "N", length=3),
@@ -99,6 +133,8 @@ class MockHardwareNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("mock_hardware", **kwargs)
         self.p = declare(self, PARAMS)
+        if np.any(np.asarray(self.p.workspace_min) >= np.asarray(self.p.workspace_max)):
+            raise ValueError("parameter workspace_min must be below workspace_max")
         self.plane = plane_frame(self.p)
         vertices, closed, friction, start = load_terrain(
             self.p.problem, self.p.seed, self.p.terrain_file
@@ -116,6 +152,7 @@ class MockHardwareNode(Node):
         self.dt = 1.0 / self.p.rate_hz
         self.velocity = np.zeros(2)
         self.command_time = None
+        self.timeouts = 0  # moving commands stopped for their age
         self.pose_pub = self.create_publisher(PoseStamped, "tool_pose", qos.SENSOR)
         self.wrench_pub = self.create_publisher(WrenchStamped, "wrench", qos.SENSOR)
         truth_pub = self.create_publisher(ShapeDistribution, "~/ground_truth", qos.LATCHED)
@@ -166,9 +203,28 @@ class MockHardwareNode(Node):
         self.command_time = now_seconds(self)
 
     def on_tick(self) -> None:
-        fresh = self.command_time is not None
-        fresh = fresh and now_seconds(self) - self.command_time <= self.p.command_timeout
-        self.sim.step(self.velocity if fresh else np.zeros(2), self.dt)
+        age = None if self.command_time is None else now_seconds(self) - self.command_time
+        fresh = age is not None and age <= self.p.command_timeout
+        if not fresh and np.any(self.velocity != 0.0):  # the commander fell silent mid-move
+            self.timeouts += 1
+            self.velocity = np.zeros(2)
+            self.get_logger().warning(
+                f"no command for {age * 1e3:.0f} ms: stopped ({self.timeouts} times so far)",
+                throttle_duration_sec=LIMIT_LOG_PERIOD_S,
+            )
+        velocity, reasons = limit_command(
+            self.velocity if fresh else np.zeros(2),
+            self.sim.tool,
+            self.dt,
+            self.p.max_speed,
+            self.p.workspace_min,
+            self.p.workspace_max,
+        )
+        if reasons:
+            self.get_logger().warning(
+                f"command clamped: {'; '.join(reasons)}", throttle_duration_sec=LIMIT_LOG_PERIOD_S
+            )
+        self.sim.step(velocity, self.dt)
         stamp = header(self, self.p.base_frame_id)
         position = self.plane.point_from_plane(self.sim.tool) + self.rng.normal(
             0.0, self.p.pose_noise, 3

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -109,6 +110,7 @@ class Probe(Node):
         super().__init__("safety_probe", context=context)
         self.rec = Recording()
         self.episode = 0
+        self.nonce = 0  # the episode nonce of the last status (0: none), on every plan
         self.next_id = 1
         self.plan_pub = self.create_publisher(DockingPlan, "/plan", qos.EVENTS)
         self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", qos.LATCHED)
@@ -216,13 +218,15 @@ class Probe(Node):
             return False
         return self.rec.diagnostics[-1][2].level != DiagnosticStatus.ERROR  # WARN: loop late
 
-    def plan(self, waypoints, speed=0.2, threshold=3.0, episode=None) -> int:
-        """Publish a DOCK plan (load straight down, along its last move); returns its id."""
-        plan_id, self.next_id = self.next_id, self.next_id + 1
+    def plan(self, waypoints, speed=0.2, threshold=3.0, episode=None, plan_id=None) -> int:
+        """Publish a DOCK plan (load straight down, along its last move) with the status's
+        nonce; ``plan_id`` None: the next id. Returns its id."""
+        if plan_id is None:
+            plan_id, self.next_id = self.next_id, self.next_id + 1
         command = PlanCommand(
             plan_id, True, np.array(waypoints, float), np.array([0.0, -1.0]), threshold, speed,
             False, 0.5, 0.5, 0, "safety probe",
-            episode=self.episode if episode is None else episode,
+            episode=self.episode if episode is None else episode, nonce=self.nonce,
         )  # fmt: skip
         msg = convert.plan_to_msg(
             command, convert.Header(stamp=self.get_clock().now().to_msg(), frame_id="dock_plane")
@@ -231,10 +235,13 @@ class Probe(Node):
         self.plan_pub.publish(msg)
         return plan_id
 
-    def status(self, episode: int, state: str) -> None:
+    def status(self, episode: int, state: str, nonce: int = 0) -> None:
+        """Publish the planner's episode status; the probe's plans carry ``nonce`` after it."""
         header = convert.Header(stamp=self.get_clock().now().to_msg())
-        self.status_pub.publish(convert.episode_status_to_msg(header, state, episode, "", 0, []))
-        self.episode = episode
+        self.status_pub.publish(
+            convert.episode_status_to_msg(header, state, episode, "", 0, [], nonce)
+        )
+        self.episode, self.nonce = episode, nonce
 
     def wait_episode(self, expected: str, timeout_s: float = 10.0) -> bool:
         """Until the executor's diagnostics report ``expected`` as its episode."""
@@ -286,6 +293,7 @@ def mock_floor(
     probe = Probe(context, record_sensors, amplify)
     try:
         with bringup.running(arguments, log_dir, only={"executor", "mock_hardware"}) as procs:
+            probe.respawn = lambda name: bringup.respawn(procs, name, arguments, log_dir)
             if not probe.wait_ready():
                 logs = {p.name: p.read_text()[-1500:] for p in log_dir.glob("*.log")}
                 missing = probe.not_ready()
@@ -491,7 +499,8 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     after it received the last sample, which is no earlier than that sample's stamp, so the
     figure is conservative (it includes the last sample's delivery delay).
     ``moving_after_stop``: moving commands stamped after that zero command. A run in which
-    the arm never moved (its plan aborted first) has ``latency_s`` None and an ``error``."""
+    the arm never moved (its plan aborted first), or whose stream never reached the probe, has
+    ``latency_s`` None and an ``error`` (``stop_latency``)."""
     probe.spin_until(probe.sensors_flowing, 30.0)
     tool = probe.tool(env)
     n_commands = len(probe.rec.commands)
@@ -505,11 +514,7 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     samples = probe.rec.wrenches if stream == "wrench" else probe.rec.poses
     assert probe.drop(stream, True), f"drop_{stream} failed"
     report = probe.report(plan_id, timeout_s=10.0)
-    last = max(t for t, _ in samples)
-    expiry = last + env.sensor_timeout
-    after = [(t, v) for t, v, _ in probe.rec.commands[n_commands:] if t > last]
-    zero = [t for t, v in after if np.linalg.norm(v) == 0.0]
-    late = [t for t, v in after if np.linalg.norm(v) > 0 and zero and t > zero[0]]
+    stop = stop_latency(samples, probe.rec.commands[n_commands:], env.sensor_timeout)
 
     def error() -> str:
         last = probe.rec.diagnostics[-1][2] if probe.rec.diagnostics else None
@@ -522,12 +527,103 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     probe.spin_until(lambda: probe.sensors_flowing(since=resumed_at), 10.0)
     return {
         "stream": stream,
-        "latency_s": (zero[0] - expiry) if zero else None,
-        "moving_after_stop": len(late),
+        **stop,
         "outcome": None if report is None else report.outcome_name,
         "detail": None if report is None else report.detail,
         "segments": None if report is None else len(report.history),
         "diagnostics_error": diagnostics,
+    }
+
+
+def stop_latency(samples, commands, sensor_timeout: float) -> dict:
+    """``latency_s``: stamp of the first zero command after the stream's last sample (stamp s,
+    value) minus (that stamp + ``sensor_timeout``); ``moving_after_stop``: moving commands
+    (stamp, velocity, receive time) stamped after that zero. ``latency_s`` is None when no zero
+    command came after the last sample, and also, with an ``error`` saying why, when the probe
+    got no sample of the stream (best effort: a loaded machine may deliver none to it)."""
+    if not samples:
+        return {"latency_s": None, "moving_after_stop": 0,
+                "error": "the probe received no sample of the stream"}  # fmt: skip
+    last = max(t for t, _ in samples)
+    after = [(t, v) for t, v, _ in commands if t > last]
+    zero = [t for t, v in after if np.linalg.norm(v) == 0.0]
+    late = [t for t, v in after if np.linalg.norm(v) > 0 and zero and t > zero[0]]
+    return {"latency_s": (zero[0] - last - sensor_timeout) if zero else None,
+            "moving_after_stop": len(late)}  # fmt: skip
+
+
+# --------------------------------------------------------------------------- executor exit
+
+
+def _at(poses, stamp: float) -> np.ndarray | None:
+    """The newest recorded position (3,) stamped at or before ``stamp``."""
+    before = [p for t, p in poses if t <= stamp]
+    return before[-1] if before else None
+
+
+def _at_rest(poses, since: float, window_s: float = 0.1, tolerance_m: float = 5e-4) -> bool:
+    """The poses stamped in the last ``window_s`` (all after ``since``) stay within
+    ``tolerance_m`` of the newest one (the mock's pose noise is 0.1 mm per axis)."""
+    if not poses or poses[-1][0] < since + window_s:
+        return False
+    newest = poses[-1][1]
+    recent = [p for t, p in poses if t >= poses[-1][0] - window_s]
+    return all(np.linalg.norm(p - newest) <= tolerance_m for p in recent)
+
+
+def executor_exit(
+    probe: Probe,
+    env: Envelope,
+    processes: dict,
+    signum: int,
+    delay_s: float = 0.3,
+    respawn: bool = True,
+) -> dict:
+    """Start a long move at 0.2 m/s, send ``signum`` to the executor process ``delay_s`` after
+    the arm moves, wait for the process to end and the tool to come to rest, then (``respawn``)
+    start the executor again (``Probe.respawn``) and wait until it is ready.
+
+    Returns ``distance_m``: how far the tool moved from its position at the signal until at
+    rest (base frame; the mock's own ``command_timeout`` bounds it when no stop comes);
+    ``zero_command``: a zero command stamped after the signal arrived; ``moving_after_zero``:
+    moving commands stamped after that one; the exit code; ``error`` when the arm never moved."""
+    name = signal.Signals(signum).name
+    tool = probe.tool(env)
+    n_commands = len(probe.rec.commands)
+    plan_id = probe.plan(traverse(tool, -0.5 if tool[0] > 0 else 0.5), speed=0.2)
+    if not probe.spin_until(lambda: _moving(probe.rec.commands[n_commands:]), 15.0):
+        probe.unanswered.pop(plan_id, None)
+        return {"signal": name, "distance_m": None, "error": "the arm never moved"}
+    probe.spin_until(lambda: False, delay_s)
+    process = processes["executor"]
+    t_signal = _now(probe)
+    process.send_signal(signum)
+    probe.unanswered.pop(plan_id, None)  # the planner's part: no copies for a new executor
+    probe.spin_until(lambda: process.poll() is not None, 15.0)
+    exit_code = process.poll()
+    rest = probe.spin_until(lambda: _at_rest(probe.rec.poses, t_signal), 10.0)
+    start, end = _at(probe.rec.poses, t_signal), probe.rec.poses[-1][1]
+    after = [
+        float(np.linalg.norm(v)) for t, v, _ in probe.rec.commands[n_commands:] if t > t_signal
+    ]
+    zero = after.index(0.0) if 0.0 in after else None
+    respawned_at = time.monotonic()
+    if exit_code is None:
+        process.kill()
+        process.wait()
+    ready = None
+    if respawn:
+        probe.respawn("executor")
+        ready = probe.spin_until(
+            lambda: probe.sensors_flowing(since=respawned_at) and not probe.not_ready(), 60.0
+        )
+    return {
+        "signal": name,
+        "exit_code": exit_code,
+        "distance_m": None if start is None or not rest else float(np.linalg.norm(end - start)),
+        "zero_command": zero is not None,
+        "moving_after_zero": 0 if zero is None else sum(v > 0.0 for v in after[zero:]),
+        "respawned": ready,
     }
 
 

@@ -10,6 +10,10 @@ executor and mock_hardware run as processes from the mock launch file on a flat 
 * envelope: the refusal scenarios (target outside the box, absurd speed, force threshold
   above the limit, NaN/inf, plans of superseded/ended episodes), a 60 N force fault while
   moving, two plans at once; every command checked against the box, speed and force limits.
+* exit: ``--exits`` times each, while a plan moves at 0.2 m/s, the executor process gets
+  SIGKILL (nothing can stop the arm but the mock's own ``command_timeout``) or SIGTERM (the
+  executor commands zero as it exits): the distance the tool moves from the signal until at
+  rest (median/max), whether a zero command came.
 * load: one 0.7 m plan at 0.2 m/s; baseline (sensors at the mock's rate, no other plans) vs
   loaded (each sensor sample republished 10 times, bursts of 10 plans every 0.25 s): the
   intervals between consecutive command stamps and their jitter |interval - period|,
@@ -18,14 +22,16 @@ executor and mock_hardware run as processes from the mock launch file on a flat 
 
 from __future__ import annotations
 
+import signal
 import tempfile
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from tactile_dock_ros.tools import bringup, safety
 
-PARTS = ("dropout", "envelope", "load")
+PARTS = ("dropout", "envelope", "load", "exit")
 FAST_DIAGNOSTICS = {"executor": {"diagnostics_period": 0.2}}
 
 
@@ -34,6 +40,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--dropouts", type=int, default=20, help="dropouts to measure")
     parser.add_argument("--amplify", type=int, default=10, help="sensor rate factor (load)")
     parser.add_argument("--burst", type=int, default=10, help="plans per burst (load)")
+    parser.add_argument("--exits", type=int, default=5, help="executor exits per signal (exit)")
+    parser.add_argument(
+        "--command-timeout",
+        type=float,
+        help="the mock arm's command_timeout, s (exit; default: config/mock.yaml's)",
+    )
     parser.add_argument("--log-dir", type=Path, help="node logs (default: a temporary dir)")
 
 
@@ -57,7 +69,8 @@ def _dropout(args, log_dir: Path) -> dict:
     latencies = [r["latency_s"] for r in rows if r["latency_s"] is not None]
     summary = {
         "dropouts": len(rows),
-        "never_moved": sum("error" in r for r in rows),
+        "never_moved": sum(r.get("error") == "the arm never moved" for r in rows),
+        "no_samples": sum("no sample" in r.get("error", "") for r in rows),
         "stopped": len(latencies),
         "aborted": sum(r["outcome"] == "ABORTED" for r in rows if "error" not in r),
         "aborted_with_segments": sum(bool(r["segments"]) for r in rows),
@@ -147,6 +160,46 @@ def _load(args, log_dir: Path) -> dict:
     }
 
 
+def _exit(args, log_dir: Path) -> dict:
+    rng = np.random.default_rng(args.seed)
+    overrides = dict(FAST_DIAGNOSTICS)
+    if args.command_timeout is not None:
+        overrides["mock_hardware"] = {"command_timeout": args.command_timeout}
+    rows = []
+    with safety.mock_floor(log_dir / "exit", overrides) as (probe, env, processes):
+        for i in range(args.exits):
+            for signum in (signal.SIGKILL, signal.SIGTERM):
+                delay = float(rng.uniform(0.1, 0.4))
+                row = safety.executor_exit(probe, env, processes, signum, delay)
+                rows.append(row)
+                distance = row["distance_m"]
+                print(
+                    f"  exit {i + 1:3d} {row['signal']:<7} "
+                    f"{'-' if distance is None else f'{distance * 1e3:5.1f} mm'}  "
+                    f"zero command {row.get('zero_command')}"
+                )
+                if not row.get("respawned", True):
+                    raise RuntimeError(f"the executor did not come back after {row['signal']}")
+    config = yaml.safe_load(safety.CONFIG.read_text())["mock_hardware"]["ros__parameters"]
+    command_timeout = args.command_timeout or config.get("command_timeout")
+    summary = {"mock_command_timeout_s": command_timeout}
+    for name in ("SIGKILL", "SIGTERM"):
+        mine = [r for r in rows if r["signal"] == name]
+        distances = [r["distance_m"] * 1e3 for r in mine if r["distance_m"] is not None]
+        summary[name] = {
+            "exits": len(mine),
+            "distance_mm": safety.percentiles(distances, qs=(50,)),
+            "zero_command": sum(bool(r.get("zero_command")) for r in mine),
+            "moving_after_zero": sum(r.get("moving_after_zero", 0) for r in mine),
+        }
+        d = summary[name]["distance_mm"]
+        print(
+            f"exit {name}: distance after the signal median {d['p50']:.1f} mm, max "
+            f"{d['max']:.1f} mm ({d['n']} runs), zero command in {summary[name]['zero_command']}"
+        )
+    return {"rows": rows, "summary": summary}
+
+
 def run(args) -> dict:
     if args.dropouts < 1:
         raise SystemExit("--dropouts must be >= 1")
@@ -155,5 +208,6 @@ def run(args) -> dict:
     for part in args.parts:
         bringup.isolate_dds()
         print(f"== {part}")
-        out[part] = {"dropout": _dropout, "envelope": _envelope, "load": _load}[part](args, log_dir)
+        parts = {"dropout": _dropout, "envelope": _envelope, "load": _load, "exit": _exit}
+        out[part] = parts[part](args, log_dir)
     return out
