@@ -17,6 +17,7 @@ from collections.abc import Callable
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Header
@@ -90,15 +91,19 @@ def subscribe(
     callback_group=None,
 ):
     """``node.create_subscription`` behind the guard every subscription of the suite has: the
-    stamp (and the frame, when ``frame_id`` is given) is checked, then ``callback`` runs; a
-    :class:`MessageError` from either drops the message, counted and logged by
+    serialized size is checked (``validate.max_message_bytes``) before the message is
+    deserialized, then the stamp (and the frame, when ``frame_id`` is given), then ``callback``
+    runs; a :class:`MessageError` from any drops the message, counted and logged by
     ``node.malformed`` under the resolved topic name; ``callback_group`` as rclpy's."""
     if not hasattr(node, "malformed"):
         node.malformed = MalformedLog(node.get_logger())
     stamped = "header" in msg_type.get_fields_and_field_types()
+    limit = validate.max_message_bytes(msg_type)
 
-    def guarded(msg) -> None:
+    def guarded(raw: bytes) -> None:
         try:
+            validate.check_size(name, len(raw), limit)
+            msg = deserialize_message(raw, msg_type)
             if stamped:
                 now_ns = node.get_clock().now().nanoseconds
                 validate.check_stamp(name, msg.header.stamp, now_ns)
@@ -109,7 +114,7 @@ def subscribe(
             node.malformed.drop(name, err)
 
     subscription = node.create_subscription(
-        msg_type, topic, guarded, profile, callback_group=callback_group
+        msg_type, topic, guarded, profile, callback_group=callback_group, raw=True
     )
     name = subscription.topic_name
     return subscription

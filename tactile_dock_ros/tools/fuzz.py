@@ -35,6 +35,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, UInt32
 
@@ -160,6 +161,12 @@ def in_process(messages: int, seed: int, params_dir: Path) -> dict:
     return rows
 
 
+def _deliver(subscription, msg) -> None:
+    """Call ``subscription``'s callback with ``msg`` as rclpy would: serialized for the raw
+    subscriptions of ``common.subscribe`` (their guard checks the size, then deserializes)."""
+    subscription.callback(serialize_message(msg) if subscription.raw else msg)
+
+
 def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
     now_s = int(node.get_clock().now().nanoseconds // 10**9)
     subscriptions = {s.topic_name: s for s in node.subscriptions}
@@ -171,7 +178,7 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
     }
     for topic, msg in [*live.items(), *seed_messages(now_s)]:
         if topic in subscriptions:
-            subscriptions[topic].callback(msg)
+            _deliver(subscriptions[topic], msg)
     state = getattr(node, "episode_state", None)  # inference's and the planner's history
     out = {}
     for index, (topic, subscription) in enumerate(sorted(subscriptions.items())):
@@ -188,7 +195,7 @@ def _fuzz_node(node: Node, messages: int, seed: int) -> dict:
         ):
             before = node.malformed.dropped[topic], _refused(node)
             try:
-                subscription.callback(m.msg)
+                _deliver(subscription, m.msg)
             except Exception as err:  # counted: the figure is that none escapes
                 errors[f"{m.kind}: {type(err).__name__}: {err}"[:200]] += 1
                 continue
