@@ -73,6 +73,7 @@ def build() -> dict:
             header=_header(4),
             episode=1795315710,
             plan_id=42,
+            nonce=0x1234_5678_9ABC_DEF0,
             history_length=17,
             decision=DockingPlan.GIVE_UP,
             waypoints=[Point(x=1.0, y=2.0, z=0.0), Point(x=1.5, y=1.0, z=0.0)],
@@ -90,6 +91,7 @@ def build() -> dict:
             header=_header(5),
             episode=1795315710,
             plan_id=42,
+            nonce=0x1234_5678_9ABC_DEF0,
             outcome=ExecutionReport.CONTACT_FAILED,
             segments=segments[:2],
             stop_point=Point(x=0.3, y=-0.4, z=0.0),
@@ -99,6 +101,7 @@ def build() -> dict:
         "EpisodeStatus": EpisodeStatus(
             header=_header(6),
             episode=1795315710,
+            nonce=0x1234_5678_9ABC_DEF0,
             state=EpisodeStatus.GAVE_UP,
             detail="cycle budget of 2 spent",
             prior_vertices=12,

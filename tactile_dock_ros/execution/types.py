@@ -70,6 +70,7 @@ class PlanCommand:
     target_point: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # (2,) metres
     episode: int = 0
     history_length: int = 0  # contact_history segments the plan was made on
+    nonce: int = 0  # the episode's nonce (EpisodeStatus.nonce); 0: none
 
 
 class Outcome(Enum):
@@ -96,6 +97,7 @@ class Report:
     stop_point: np.ndarray
     detail: str
     episode: int = 0
+    nonce: int = 0  # the plan's nonce, copied
 
     @property
     def outcome_name(self) -> str:

@@ -268,6 +268,7 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
         header=header,
         episode=int(command.episode),
         plan_id=int(command.plan_id),
+        nonce=int(command.nonce),
         history_length=int(command.history_length),
         decision=DockingPlan.DOCK if command.dock else DockingPlan.GIVE_UP,
         waypoints=[_point(w) for w in command.waypoints],
@@ -335,6 +336,7 @@ def plan_from_msg(msg: DockingPlan) -> PlanCommand:
         target_point=np.array([msg.target_point.x, msg.target_point.y], float),
         episode=int(msg.episode),
         history_length=int(msg.history_length),
+        nonce=int(msg.nonce),
     )
 
 
@@ -346,6 +348,7 @@ def report_to_msg(report: Report, header: Header) -> ExecutionReport:
         header=header,
         episode=int(report.episode),
         plan_id=int(report.plan_id),
+        nonce=int(report.nonce),
         outcome=int(report.outcome),
         segments=segments_to_msgs(report.history, header, report.plan_id),
         stop_point=_point(report.stop_point),
@@ -366,6 +369,7 @@ def report_from_msg(msg: ExecutionReport) -> Report:
         stop_point=_points("stop_point", [msg.stop_point], 1)[0],
         detail=msg.detail,
         episode=int(msg.episode),
+        nonce=int(msg.nonce),
     )
 
 
@@ -393,13 +397,21 @@ _CYCLE_OUTCOME_NAMES = {code: name for name, code in _CYCLE_OUTCOMES.items()}
 
 
 def episode_status_to_msg(
-    header: Header, state: str, episode: int, detail: str, prior_vertices: int, cycles
+    header: Header,
+    state: str,
+    episode: int,
+    detail: str,
+    prior_vertices: int,
+    cycles,
+    nonce: int = 0,
 ) -> EpisodeStatus:
     """The planner's episode status; ``state`` one of EPISODE_STATES, ``cycles`` its records in
-    order (dicts: p_dock, inference_s, planning_s and, once reported, execution_s and outcome)."""
+    order (dicts: p_dock, inference_s, planning_s and, once reported, execution_s and outcome),
+    ``nonce`` the episode's (0: none)."""
     return EpisodeStatus(
         header=header,
         episode=int(episode),
+        nonce=int(nonce),
         state=getattr(EpisodeStatus, state),
         detail=detail,
         prior_vertices=int(prior_vertices),

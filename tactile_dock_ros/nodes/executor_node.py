@@ -195,12 +195,22 @@ class ExecutorNode(Node):
         return self.filter.value
 
     def on_plan(self, msg: DockingPlan) -> None:
+        """Run, refuse (with a report) or drop (MessageError: no report) a plan. Decision: a
+        refused or dropped plan changes no state - neither the plan order (``last_plan``) nor
+        the running plan's heartbeat; the running plan's copies are recognised before the
+        bounded ``seen_plans`` is consulted, so no amount of other traffic evicts them."""
         plan = convert.plan_from_msg(msg)  # first: a malformed copy must not mark a plan seen
         key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
-        if key in self.seen_plans:  # the planner resends a plan until its report arrives
-            if key == self.plan_heard[0]:
-                self.plan_heard = (key, now_seconds(self))
+        if key == self.plan_heard[0]:  # the planner resends a plan until its report arrives
+            self.plan_heard = (key, now_seconds(self))
             return
+        if key in self.seen_plans:
+            return
+        if not self.gate.authentic(plan.episode, plan.nonce):
+            raise convert.MessageError(
+                f"plan {plan.plan_id} of episode {plan.episode} without the episode's nonce "
+                "(not sent by the planner)"
+            )
         admission, why = self.gate.admit(plan.episode)
         if admission is Admission.WAIT:  # not marked seen: a copy after the status may run
             raise convert.MessageError(f"plan {plan.plan_id} of episode {plan.episode}: {why}")
@@ -209,6 +219,7 @@ class ExecutorNode(Node):
         if len(self.seen_plans) > SEEN_PLANS:
             del self.seen_plans[next(iter(self.seen_plans))]
         if not plan.dock:
+            self.last_plan = (plan.episode, plan.plan_id)
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
             return
         if self.busy():  # a second plan is refused, never preempts the running one
@@ -217,6 +228,7 @@ class ExecutorNode(Node):
         if admission is Admission.REFUSE:
             self.report(plan, Outcome.ABORTED, f"refused: {why}")
             return
+        self.last_plan = (plan.episode, plan.plan_id)
         self.pending = (plan, now_seconds(self))
         self.plan_heard = (key, now_seconds(self))  # its copies: the planner lives
         self.get_logger().info(
@@ -227,18 +239,18 @@ class ExecutorNode(Node):
         return self.run is not None or self.pending is not None
 
     def check_order(self, plan) -> None:
-        """Plans of one episode run in plan-id order: a late or replayed plan is dropped (no
-        report); which episodes may run at all is ``EpisodeGate``'s decision."""
+        """Plans of one episode run in plan-id order: a plan not after the last one accepted
+        (late or replayed) is dropped (no report); which episodes may run at all is
+        ``EpisodeGate``'s decision."""
         if self.last_plan[0] == plan.episode and plan.plan_id <= self.last_plan[1]:
             raise convert.MessageError(
                 f"plan {plan.plan_id} of episode {plan.episode} after its plan {self.last_plan[1]}"
             )
-        self.last_plan = (plan.episode, plan.plan_id)
 
     def on_episode_status(self, msg: EpisodeStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state, episode = convert.episode_status_from_msg(msg)
-        self.gate.update(episode, state)
+        self.gate.update(episode, state, int(msg.nonce))
         plan = self.run.plan if self.run else self.pending[0] if self.pending else None
         if plan is None or (plan.episode == episode and state == "RUNNING"):
             return
@@ -353,6 +365,7 @@ class ExecutorNode(Node):
         report = Report(
             episode=plan.episode,
             plan_id=plan.plan_id,
+            nonce=plan.nonce,
             outcome=outcome.value,
             history=History() if history is None else history,
             stop_point=np.zeros(2) if stop is None else stop,

@@ -2,7 +2,9 @@
 
 Subscribes ``terrain_prior`` (ShapeDistribution, latched), ``execution_report`` (only reports of the
 current episode count; latched, so reports sent while this node was down arrive when it starts) and
-``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the history).
+``episode`` (std_msgs/UInt32, latched: the planner's episode id; a new id empties the history)
+and ``episode_status`` (EpisodeStatus, latched: a report without its episode's nonce was not
+sent for a plan of the planner and is dropped, ``watchdog.EpisodeGate.authentic``).
 Keeps the history in a ``core.episode.EpisodeState`` (each row with the plan that observed it; the
 previous posterior, the sampler's warm start), publishes it latched on ``contact_history`` (once an
 episode id came) and, after every change while an episode runs, samples the posterior with
@@ -42,10 +44,17 @@ from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.execution.types import Report
-from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
+from tactile_dock_ros.msg import (
+    ContactHistory,
+    EpisodeStatus,
+    ExecutionReport,
+    ShapeDistribution,
+    ShapeSamples,
+)
 from tactile_dock_ros.nodes import convert, journal, markers, qos, warm_start
 from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
+from tactile_dock_ros.nodes.watchdog import EpisodeGate
 
 PARAMS = [
     PLANE_FRAME_ID,
@@ -87,6 +96,7 @@ class InferenceNode(Node):
         self.frame_id = self.p.plane_frame_id
         self.handled_plans: set[int] = set()
         self.episode = 0
+        self.gate = EpisodeGate()  # the planner's episode statuses: the nonces of reports
         self.past_episodes: set[int] = set()  # ids that ended here: a late copy is no new one
         self.stash: deque = deque(maxlen=STASHED_REPORTS)
         self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
@@ -103,6 +113,7 @@ class InferenceNode(Node):
             (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, frame),
             (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, frame),
             (UInt32, "episode", self.on_episode, qos.LATCHED, None),
+            (EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED, None),
         ]
         for msg_type, topic, callback, profile, frame_id in subscriptions:
             subscribe(self, msg_type, topic, callback, profile, frame_id, callback_group=inputs)
@@ -195,8 +206,20 @@ class InferenceNode(Node):
             f"of the {rows} history rows"
         )
 
+    def on_episode_status(self, msg: EpisodeStatus) -> None:
+        state, episode = convert.episode_status_from_msg(msg)
+        with self.lock:
+            self.gate.update(episode, state, int(msg.nonce))
+
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
+        with self.lock:
+            authentic = self.gate.authentic(report.episode, report.nonce)
+        if not authentic:
+            raise convert.MessageError(
+                f"report of plan {report.plan_id} of episode {report.episode} without the "
+                "episode's nonce (not a report of a plan the planner sent)"
+            )
         if report.episode != self.episode:
             self.stash.append(report)  # maybe an episode whose id has not arrived yet
             self.get_logger().warning(
@@ -209,7 +232,13 @@ class InferenceNode(Node):
 
     def apply(self, report: Report) -> bool:
         """Add a report of the current episode to the history (journaled first); False for a
-        duplicate (the executor's reports are latched: a restart receives them again)."""
+        duplicate or late one (the executor's reports are latched: a restart receives them
+        again) and for one without segments. Decision: a report without segments (an ABORTED
+        or refused plan's) is no evidence and changes no state: a refusal of a plan the planner
+        did not send (its id, maybe far ahead) must not make the real reports late."""
+        if not len(report.history):
+            self.get_logger().info(f"plan {report.plan_id}: report without evidence, not recorded")
+            return False
         if report.plan_id <= max(self.handled_plans, default=0):  # plans run one at a time
             self.get_logger().info(f"plan {report.plan_id}: duplicate or late report ignored")
             return False

@@ -27,6 +27,7 @@ the episode: the next plan is made once inference has the attempt's evidence.
 from __future__ import annotations
 
 import base64
+import secrets
 import time
 
 import numpy as np
@@ -97,6 +98,13 @@ def planner_config(p) -> PlannerConfig:
     )
 
 
+def new_nonce() -> int:
+    """A random nonzero 63-bit episode nonce (``watchdog.EpisodeGate.authentic``). Decision:
+    from the operating system's entropy, not a seeded generator: it must differ between
+    planners and restarts that share a seed, and nothing computed depends on its value."""
+    return secrets.randbits(63) or 1
+
+
 RESEND_PERIOD = 0.5  # seconds between copies of the plan being executed (executor heartbeat)
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
 
@@ -113,6 +121,7 @@ class PlannerNode(Node):
         self.samples = None  # (msg, vertices) of the newest samples
         self.samples_ahead = None  # newer ones conditioned on rows not yet in contact_history
         self.episode = 0
+        self.nonce = 0  # the episode's (new_nonce); its plans carry it, its reports must
         self.state = IDLE
         self.awaiting_plan = None  # plan_id being executed
         self.cycles: list[dict] = []
@@ -198,12 +207,12 @@ class PlannerNode(Node):
             return response
         stamp_ms = (self.get_clock().now().nanoseconds // 1_000_000) % 2**32
         self.episode = stamp_ms if stamp_ms not in (0, self.episode) else self.episode + 1
-        self.state, self.cycles = RUNNING, []
+        self.state, self.cycles, self.nonce = RUNNING, [], new_nonce()
         self.episode_state = EpisodeState(tool=self.episode_state.tool)  # inference clears too
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
         self.stage_start = now_seconds(self)
-        start = {"event": "start", "episode": self.episode}
+        start = {"event": "start", "episode": self.episode, "nonce": self.nonce}
         self.log(start | {"start_ns": self.episode_start.nanoseconds}, reset=True)
         self.episode_pub.publish(UInt32(data=self.episode))
         self.get_logger().info(f"episode {self.episode}: started")
@@ -216,6 +225,11 @@ class PlannerNode(Node):
         current = report.episode == self.episode and report.plan_id == self.awaiting_plan
         if self.state != RUNNING or not current:
             return
+        if report.nonce != self.nonce:
+            raise convert.MessageError(
+                f"report of plan {report.plan_id} without the episode's nonce (not the executor's "
+                "report of the plan sent)"
+            )
         execution_s = stamp_seconds(msg.header.stamp) - self.cycles[-1]["plan_stamp"]
         event = {"event": "report", "plan_id": report.plan_id, "outcome": report.outcome_name}
         event |= {"execution_s": execution_s, "segments": len(report.history)}
@@ -313,6 +327,7 @@ class PlannerNode(Node):
             target_point=result.target_point,
             episode=self.episode,
             history_length=history_length,
+            nonce=self.nonce,
         )
         out = convert.plan_to_msg(command, header(self, self.p.plane_frame_id))
         event = {
@@ -408,6 +423,7 @@ class PlannerNode(Node):
         kind = event["event"]
         if kind == "start":
             self.episode, self.state, self.cycles = event["episode"], RUNNING, []
+            self.nonce = int(event.get("nonce", 0))  # 0: a journal written before nonces
             self.episode_state = EpisodeState(tool=self.episode_state.tool)
             clock_type = self.get_clock().clock_type
             self.episode_start = Time(nanoseconds=event["start_ns"], clock_type=clock_type)
@@ -436,7 +452,13 @@ class PlannerNode(Node):
         prior_vertices = 0 if self.prior is None else self.prior.n_vertices
         self.status_pub.publish(
             convert.episode_status_to_msg(
-                header(self, ""), self.state, self.episode, detail, prior_vertices, self.cycles
+                header(self, ""),
+                self.state,
+                self.episode,
+                detail,
+                prior_vertices,
+                self.cycles,
+                self.nonce,
             )
         )
 

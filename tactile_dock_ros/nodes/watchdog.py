@@ -65,16 +65,31 @@ class EpisodeGate:
     refused; a plan of an unknown episode waits for its status (DDS does not order the plan
     and status topics): the executor drops that copy unseen, and the planner's next copy
     (resent every 0.5 s) runs once the RUNNING status came.
+
+    Identity (``authentic``): the status carries the episode's nonce, a random number the
+    planner mints at the start; plans and reports of an episode whose status gave a nonce
+    count only with that nonce. Decision: a plan or report is matched to what the planner sent,
+    not merely "newer": a stray node (a test tool, a bag replayed on the live graph, another
+    robot's stack on the domain) that publishes a plan or report for the running episode does
+    not know the nonce, and its message is dropped before it changes any state. It is not an
+    authentication: a node that reads the status can copy it; SROS2 access control is that.
     """
 
     def __init__(self) -> None:
         self.current: int | None = None
         self.running = False
         self._seen: set[int] = set()
+        self._nonces: dict[int, int] = {}  # episode -> its nonce (0: the planner gave none)
 
-    def update(self, episode: int, state: str) -> None:
+    def update(self, episode: int, state: str, nonce: int = 0) -> None:
         self._seen.add(episode)
+        self._nonces[episode] = nonce
         self.current, self.running = episode, state == "RUNNING"
+
+    def authentic(self, episode: int, nonce: int) -> bool:
+        """False for a plan or report of ``episode`` whose status gave another nonce."""
+        expected = self._nonces.get(episode, 0)
+        return expected == 0 or nonce == expected
 
     def admit(self, episode: int) -> tuple[Admission, str]:
         """(decision, reason for a refusal or a wait)."""
