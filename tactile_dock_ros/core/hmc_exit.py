@@ -16,7 +16,7 @@ changes, not when a function it calls from another file does: after editing ``ro
 this file, whose ``pair_value`` ``descent_scan`` calls) in a work tree, delete
 ``core/__pycache__/*.nb?`` (an installed package never changes under its cache).
 
-The coefficients and the window filter are compiled too (stop 33). On an iteration of a
+The coefficients and the window filter are compiled too (2026-11-27, d6c96f4). On an iteration of a
 late depth-prior three_ledges cycle (16 chains, 7760 primitives of 1691 pairs on 61 edges;
 one-off timing) the numpy coefficients (C, 5, K) (two (C, m) x (m, K) products), their
 Bernstein filter and the live pairs took ~9 ms of the iteration's 9.6 ms, the exit search
