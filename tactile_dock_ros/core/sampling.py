@@ -67,7 +67,7 @@ SAMPLERS = {
         Sampler("hmc", mcmc=True, on_node=True, burn_in=(3, 1)),
         # a benchmark method: on a late depth-prior cycle (three_ledges, 63 observations) 20
         # pooled runs lie 0.57 std (median coordinate) from an SMC reference, 1.33x too wide,
-        # where HMC's lie 0.03 (stop 31; docs/inference.md): its axis sweeps do not cross the
+        # where HMC's lie 0.03 (2026-11-27; docs/inference.md): its axis sweeps do not cross the
         # posterior's correlations in the sweeps a cycle can afford
         Sampler("gibbs", mcmc=True, on_node=False, burn_in=(5, 1)),
         # a benchmark baseline only: its chains barely move (split R-hat ~4 on Fig. 9 problem
@@ -545,7 +545,7 @@ def _exact_seeds(shape, history, system, chains, rng):
     """Up to ``chains`` prior draws consistent with the history and feasible for the pruned
     ``system`` (exact posterior draws), and the prior draws spent: a first batch of
     SEED_PRIOR_BATCH, then up to SEED_PRIOR_DRAWS per chain unless the first batch had no hit
-    (acceptance too low for the budget to pay: descent seeds the chains). Since stop 35 this
+    (acceptance too low for the budget to pay: descent seeds the chains). Since 2026-11-27 this
     runs on every call with a history, warm start or not, so the cheap test screens first (a
     first batch on a 136-row depth-prior history: 10 ms, the exact test of all 128 draws 64 ms)."""
     found, count, spent = [np.zeros((0, shape.n_basis))], 0, 0
@@ -593,7 +593,7 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
        posterior probability (``_exact_seeds``: a bounded budget, skipped when the first batch
        has no hit). Tried first, also with ``init_z``: HMC chains cannot cross between
        separate regions, so chains seeded from the previous posterior keep its regions'
-       shares, and each cycle adds the noise of its few chains to them. Measured (stop 35,
+       shares, and each cycle adds the noise of its few chains to them. Measured (2026-11-27,
        ``bench posterior --reference rejection``, sloper truth 1, depth prior, non-compliant,
        20 warm runs pooled against 2000 rejection draws): warm seeds only were 0.31 (cycle 2,
        7 rows) and 0.40 (cycle 3, 11 rows) posterior std off in the median vertex
