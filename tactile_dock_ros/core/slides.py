@@ -45,8 +45,8 @@ def crossed_piece_evidence(
     ``bench docking``, depth prior, compliant: P_dock 0.7-0.9 for 12 cycles). 2 cm (every
     prior edge) was measured too: it made near-critical slopes thin slabs for HMC (cycles of
     3-5 minutes on three_ledges truth 19, the slowest ours cycle 11 s) for the same give-ups on
-    sloper. Stop 18 had tried two per piece on the problem priors, when the seed search still
-    stalled on the extra rows (it is bounded since).
+    sloper. Two per piece were tried (2026-11-24) on the problem priors, when the seed search
+    still stalled on the extra rows (it is bounded since).
     Decision: a piece within 30 degrees of ``push`` (|sin| < MIN_PIECE_SINE; e.g. the vertical
     wall below a ledge lip the tool drops along) gives none. A segment along ``push`` crosses
     such a piece only if the surface passes within contact_resolution * sin / 2 of its middle
