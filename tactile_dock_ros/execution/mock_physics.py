@@ -20,7 +20,7 @@ does): the stiffness axes follow the command, the force does not jump with them.
 deflection built up across the motion under the weak lateral spring became a push along the
 stiff new direction at once: after a slide and the executor's retreat, 4 cm at 25 N/m (1.3 N)
 turned into 19 N in one step (``test_a_new_motion_direction_keeps_the_contact_force_continuous``).
-Until stop 27 only turns above 30 degrees re-anchored (not reversals, not steering within a
+Until 2026-11-26 only turns above 30 degrees re-anchored (not reversals, not steering within a
 move), but any turn of the stiff axis under a deflection jumps the force (4 cm: 1.3 N -> 5.9 N
 for a 20 degree steer): in the node suite the executor's release along the measured force after
 a retreat (16 degrees off the reverse of a move the tool had slid along) stopped at once with
