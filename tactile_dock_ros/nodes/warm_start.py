@@ -5,7 +5,7 @@ belong to (``<state_directory>/inference_warm_start.npz``, replaced atomically:
 ``journal.replace_atomically``). A restarted node that restores the episode's history from
 its journal (``nodes.journal``) takes them as the sampler's warm start
 (``sample_posterior(init_z=...)``) once the prior arrives, instead of seeding cold from the
-history alone. Decision (stop 33): a snapshot is used only if it is of the same episode, of
+history alone. Decision (d6c96f4): a snapshot is used only if it is of the same episode, of
 the same prior (z means nothing in another basis: ``prior_fingerprint``, a hash of the
 prior's mean and basis) and of a history no longer than the restored one (a shorter one is
 what every cycle of the loop warm-starts from: the previous posterior; a longer one means
