@@ -434,7 +434,7 @@ class _StopRequest:
     """SIGINT / SIGTERM handler: raises KeyboardInterrupt where the run is (a prompt stop) and
     remembers the request, so that the run also stops after the current episode if code under
     it swallowed the exception (a single-process run once finished every episode after a
-    SIGTERM in CI, stop 29: not reproduced, cause unknown)."""
+    SIGTERM in CI, 2026-11-27: not reproduced, cause unknown)."""
 
     def __init__(self) -> None:
         self.requested = False
