@@ -198,12 +198,12 @@ def test_interrupted_run_reports_the_finished_episodes(tmp_path, monkeypatch):
 
 
 SIGTERM_IGNORED_IN_CI = (
-    "open bug (stop 29): in 2 of 3 fresh-clone CI runs on one machine the single-process run "
+    "open bug (2026-11-27): in 2 of 3 fresh-clone CI runs on one machine the single-process run "
     "finished all 72 episodes after the SIGTERM (no error episodes); not reproduced outside "
     "pytest (5 manual runs, warm and cold numba cache). The handler code is shared with the "
-    "2-worker case, which passes. Stop 34: a stop swallowed inside an episode now still ends "
-    "the run after it (test_a_stop_swallowed_inside_an_episode_...); it passed in stop 33's "
-    "four CI runs."
+    "2-worker case, which passes. Since 385185b a stop swallowed inside an episode now still ends "
+    "the run after it (test_a_stop_swallowed_inside_an_episode_...); it passed in four CI runs "
+    "before that."
 )
 
 
