@@ -3,8 +3,11 @@
 Set at import time so that every process a test starts inherits the same isolated domain.
 """
 
+import logging
 import os
 from pathlib import Path
+
+import pytest
 
 from tactile_dock_ros.tools.bringup import isolate_dds
 
@@ -17,3 +20,41 @@ os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(TEST_DIR / "fastdds_profile.xm
 os.environ["PYTHONPATH"] = os.pathsep.join(
     [str(REPO_ROOT), str(TEST_DIR), *filter(None, [os.environ.get("PYTHONPATH")])]
 )
+
+
+class LogRecords(logging.Handler):
+    """Collects the records its loggers handle; ``text`` joins their messages."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not any(r is record for r in self.records):  # once, also where it propagates
+            self.records.append(record)
+
+    @property
+    def text(self) -> str:
+        return "\n".join(r.getMessage() for r in self.records)
+
+
+@pytest.fixture
+def package_log():
+    """Records logged by the package's loggers, caught by a handler on each of them.
+
+    Not through propagation to the root logger as ``caplog`` is: launch_testing's pytest
+    plugin (``colcon test`` on a ROS install) imports ``launch``, whose logger class turns
+    ``propagate`` off for every logger created after it."""
+    handler = LogRecords()
+    loggers = [logging.getLogger("tactile_dock_ros")] + [
+        logger
+        for name, logger in list(logging.Logger.manager.loggerDict.items())
+        if name.startswith("tactile_dock_ros.") and isinstance(logger, logging.Logger)
+    ]
+    for logger in loggers:
+        logger.addHandler(handler)
+    try:
+        yield handler
+    finally:
+        for logger in loggers:
+            logger.removeHandler(handler)

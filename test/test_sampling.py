@@ -407,7 +407,7 @@ def test_descent_seeds_stay_near_the_posterior(problem2_reference):
     assert len(z) >= 32 and dev.max() < 5, dev.max()
 
 
-def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch, caplog):
+def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch, package_log):
     """Warm-start 4 of 20 chains in a pocket (no exact seeds, as on a long history): without
     re-seeding the diagnostic flags them, warns and the means are off; with it they are
     re-seeded and the means are right."""
@@ -423,32 +423,30 @@ def test_trapped_chains_are_flagged_and_reseeded(problem2_reference, monkeypatch
         )
 
     monkeypatch.setattr(sampling, "RESEED_ROUNDS", 0)
-    with caplog.at_level("WARNING", logger=sampling.__name__):
-        trapped = run()
+    trapped = run()
     assert trapped.convergence.trapped == 4 and not trapped.convergence.converged
     assert trapped.convergence.rhat > trapped.convergence.rhat_limit
-    assert "disagree" in caplog.text
+    assert "disagree" in package_log.text
     assert _mean_error(trapped, mean, std) > 1.0
     monkeypatch.setattr(sampling, "RESEED_ROUNDS", 2)
-    caplog.clear()
-    with caplog.at_level("WARNING", logger=sampling.__name__):
-        fixed = run()
+    package_log.records.clear()
+    fixed = run()
     assert fixed.convergence.reseeded >= 4 and fixed.convergence.rounds >= 1
     assert fixed.convergence.converged and fixed.convergence.trapped == 0
-    assert "re-seeded" in caplog.text
+    assert "re-seeded" in package_log.text
     assert _mean_error(fixed, mean, std) < MEAN_TOL
     assert history_consistent(False, fixed.vertices, history, problem.friction).all()
 
 
 @pytest.mark.parametrize("in_pocket", [10, 14])
 def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
-    problem2_reference, in_pocket, caplog, monkeypatch
+    problem2_reference, in_pocket, package_log, monkeypatch
 ):
     """Warm-start 14 (10) of 20 chains in a pocket. 14: the 6 others are the ones
     ``trapped_chains`` names (away from the median chain) but they hold the posterior's mass
-    (``mass_gap``); with the head count alone (the rule before stop 32) they were re-seeded
+    (``mass_gap``); with the head count alone (the rule until 2026-11-27) they were re-seeded
     into the pocket and every chain ended there. 10: no chain is named (the robust std spans
-    both groups), split R-hat is far above its limit (5.9 before stop 32, with only a
+    both groups), split R-hat is far above its limit (5.9 until 2026-11-27, with only a
     warning), and the split (``chain_groups``) is judged by mass. Either way the pocket's
     chains are re-seeded from the others and the means are right (no exact seeds, as on a
     long history)."""
@@ -459,13 +457,12 @@ def test_a_pocket_holding_half_the_chains_or_more_is_re_seeded_not_the_others(
         problem.prior, history, 20 - in_pocket, np.random.default_rng(1), "rejection"
     ).z
     init = np.vstack([good, np.tile(pocket, (in_pocket, 1))])
-    with caplog.at_level("WARNING", logger=sampling.__name__):
-        out = sample_posterior(
-            problem.prior, history, 800, np.random.default_rng(2), chains=20, init_z=init
-        )
+    out = sample_posterior(
+        problem.prior, history, 800, np.random.default_rng(2), chains=20, init_z=init
+    )
     assert out.convergence.mass_rounds >= 1 and out.convergence.reseeded >= in_pocket
     assert out.convergence.converged
-    assert "find far less posterior mass" in caplog.text
+    assert "find far less posterior mass" in package_log.text
     assert _mean_error(out, mean, std) < MEAN_TOL
 
 
@@ -578,7 +575,7 @@ class _WalkRunner:
 
 
 @pytest.mark.parametrize("kick", [False, True])
-def test_a_chain_that_never_verifies_does_not_empty_the_run(monkeypatch, caplog, kick):
+def test_a_chain_that_never_verifies_does_not_empty_the_run(monkeypatch, package_log, kick):
     """Chain 0 starts at z_0 = 10, where every draw fails the exact test. It restarts from a
     full chain (and verifies) or, when it fails again, is dropped with a warning; the other
     chains keep their full length (before: every chain was cut to chain 0's zero draws). The
@@ -588,15 +585,14 @@ def test_a_chain_that_never_verifies_does_not_empty_the_run(monkeypatch, caplog,
     run = sampling._ChainRun(_WalkRunner(kick), None, None, 30, 1, 5, 200, np.random.default_rng(1))
     z0 = np.zeros((6, 3))
     z0[0, 0] = 10.0
-    with caplog.at_level("WARNING", logger=sampling.__name__):
-        draws, last, kept = run(z0)
+    draws, last, kept = run(z0)
     # stalled after 60 steps; the restart verifies in 30 (or, kicked again, stalls after 60)
     assert run.steps == (60 + 60 if kick else 60 + 30)
     assert draws.shape == ((5, 30, 3) if kick else (6, 30, 3))
     assert np.all(draws[..., 0] < 5)
     assert kept.tolist() == ([1, 2, 3, 4, 5] if kick else list(range(6)))
     assert last.shape == (len(kept), 3) and np.all(last[:, 0] < 5)
-    assert ("1 of 6 walk chains dropped" in caplog.text) == kick
+    assert ("1 of 6 walk chains dropped" in package_log.text) == kick
 
 
 def test_a_chain_verifying_slowly_is_not_taken_for_stalled():
