@@ -1,4 +1,4 @@
-"""Fuzzing every subscription of every node (issue 13.1), reduced: the bench runs 1000 / topic.
+"""Fuzzing every subscription of every node, reduced: the bench runs 1000 / topic.
 
 In-process, every malformed message reaches a guarded callback and is dropped, nothing escapes,
 inference's history is untouched and the executor takes no plan while no episode runs. Over

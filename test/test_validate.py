@@ -1,4 +1,4 @@
-"""Validation of incoming messages (issue 13.1): any field values either convert to finite,
+"""Validation of incoming messages: any field values either convert to finite,
 in-contract data or raise MessageError, never another exception; the drop log is throttled per
 cause; every subscription of every node goes through the guard (``common.subscribe``)."""
 

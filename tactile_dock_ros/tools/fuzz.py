@@ -1,4 +1,4 @@
-"""Fuzzing every subscription of every node with malformed messages (issue 13, item 1).
+"""Fuzzing every subscription of every node with malformed messages.
 
 Two seeded, bounded runs over the same mutations (``tools.fuzz_messages``):
 

@@ -1,4 +1,4 @@
-"""Seeded mutations of valid messages, one table per message type (issue 13, used by tools.fuzz).
+"""Seeded mutations of valid messages, one table per message type (used by tools.fuzz).
 
 Each :class:`Mutation` says whether it is *malformed* (NaN / inf fields, empty or mismatched
 arrays, arrays of 10^6 elements or past the contract's limits, a wrong frame_id, a stamp far in

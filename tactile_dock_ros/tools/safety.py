@@ -1,4 +1,4 @@
-"""Fault injection against the executor on the mock arm (issue 13: dropout, envelope, load).
+"""Fault injection against the executor on the mock arm (dropout, envelope, load, exit).
 
 :func:`mock_floor` starts ``executor`` and ``mock_hardware`` from the mock launch file as
 processes (a flat floor, parameters of ``config/mock.yaml`` plus overrides) and a :class:`Probe`

@@ -279,7 +279,7 @@ def _warm_start(args) -> dict:
 
 
 def _posterior_check(args) -> dict:
-    """Seeding check (issue 12): Fig. 9 problem 2, HMC and Gibbs with default options over
+    """Seeding check: Fig. 9 problem 2, HMC and Gibbs with default options over
     --check-seeds seeds against one long rejection run (20000 samples). Per run: the largest
     standardized error of the marginal vertex means, |mean - mean_ref| / std_ref, and the
     largest std ratio; per method: their maxima, the runs off by more than 0.3 std, the runs
