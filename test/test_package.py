@@ -20,6 +20,7 @@ from packaging.utils import canonicalize_name
 # Third-party import name -> rosdep key declared in package.xml.
 ROSDEP_KEYS = {
     "numpy": "python3-numpy",
+    "numba": "python3-numba",
     "scipy": "python3-scipy",
     "shapely": "python3-shapely",
     "yaml": "python3-yaml",
@@ -44,11 +45,9 @@ ROSDEP_KEYS = {
     "launch_testing": "launch_testing",
 }
 # Imported, but rosdistro has no rosdep key for it: installed from requirements-pip.txt and not
-# declared. numba's key (python3-numba) resolves on Debian and Ubuntu bionic / focal only, not on
-# noble (Jazzy, Kilted); tmg_hmc is only the baseline of `bench sampling` (which has
-# --skip-tmg); mcap and mcap_ros2 only read bags back in test_replay.py (others' MCAP reader).
+# declared. tmg_hmc is only the baseline of `bench sampling` (which has --skip-tmg); mcap and
+# mcap_ros2 only read bags back in test_replay.py (others' MCAP reader).
 PIP_ONLY = {
-    "numba": "numba",
     "tmg_hmc": "tmg-hmc",
     "mcap": "mcap",
     "mcap_ros2": "mcap-ros2-support",
@@ -68,14 +67,15 @@ OTHER_USES = {
 # Every key package.xml may use. System keys of ros/rosdistro's rosdep/*.yaml, checked by name:
 # merged rosdistro PRs added python3-rosbags-pip (37795), python3-ruff-pip (39543),
 # python3-hypothesis (23334), python3-shapely (25369), python3-packaging (23363),
-# python3-catkin-pkg (18093), python3-yaml (15377); numpy, scipy, matplotlib, opencv and pytest are
-# keys of ROS 2's own packages. There is none for open3d or tmg-hmc. ROS keys: packages released in
-# Humble, Jazzy and Kilted. `rosdep` cannot run here (`rosdep init` fetches its sources list from
-# GitHub): test_rosdep_resolves_every_key runs it where it is initialized.
+# python3-catkin-pkg (18093), python3-yaml (15377); python3-numba resolves to apt on noble; numpy,
+# scipy, matplotlib, opencv and pytest are keys of ROS 2's own packages. There is none for open3d
+# or tmg-hmc. ROS keys: packages released in Humble, Jazzy and Kilted. `rosdep` cannot run here
+# (`rosdep init` fetches its sources list from GitHub): test_rosdep_resolves_every_key runs it
+# where it is initialized.
 SYSTEM_KEYS = {
     "python3-numpy", "python3-scipy", "python3-shapely", "python3-yaml", "python3-matplotlib",
     "python3-opencv", "python3-rosbags-pip", "python3-pytest", "python3-hypothesis",
-    "python3-catkin-pkg", "python3-packaging", "python3-ruff-pip",
+    "python3-catkin-pkg", "python3-packaging", "python3-ruff-pip", "python3-numba",
 }  # fmt: skip
 ROS_KEYS = {
     "ament_cmake", "ament_cmake_python", "ament_cmake_pytest", "ament_index_python",
