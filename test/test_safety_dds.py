@@ -1,10 +1,11 @@
-"""The executor under faults, over DDS (issue 13 items 3, 4, 6): executor and mock_hardware run
+"""The executor under faults, over DDS: executor and mock_hardware run
 as processes from the mock launch file on a flat floor; ``tools.safety`` plays the planner and
 records every command to the arm. The last test re-runs each scenario with one protection
 removed (a ``sitecustomize`` the processes import patches it out) and checks that the scenario's
 assertion then fails: the checks see what they claim to see.
 """
 
+import os
 import signal
 
 import numpy as np
@@ -75,9 +76,21 @@ def test_no_command_leaves_the_envelope(tmp_path):
 
 def _load(tmp_path):
     with safety.mock_floor(tmp_path, FAST_DIAGNOSTICS, record_sensors=False, amplify=10) as (
-        probe, env, _,
+        probe, env, processes,
     ):  # fmt: skip
-        return safety.control_jitter(probe, env, burst_size=10), env
+        result = safety.control_jitter(probe, env, burst_size=10)
+        result["policy"] = os.sched_getscheduler(processes["executor"].pid)
+        return result, env
+
+
+def _real_time_allowed() -> bool:
+    """Whether this process may take SCHED_FIFO (root or an rtprio limit), as the node would."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except OSError:
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
 
 
 def _load_failures(result, env) -> list[str]:
@@ -115,6 +128,9 @@ def test_control_loop_keeps_its_period_under_10x_sensor_rate_and_plan_bursts(tmp
     for stream, rate in result["executor_rate_hz"].items():
         assert rate >= 1.3 * result["mock_rate_hz"], (stream, result)
     assert _load_failures(result, env) == [], result
+    # the control loop's thread runs real-time where the machine allows it (thread_priority)
+    if _real_time_allowed():
+        assert result["policy"] == os.SCHED_FIFO, result["policy"]
 
 
 def _exit_ok(row) -> bool:

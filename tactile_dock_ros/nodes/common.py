@@ -218,7 +218,8 @@ def run(
     executor: Callable[[], Executor] = SingleThreadedExecutor,
 ) -> int:
     """Console entry point: init, spin with ``executor()`` until SIGINT or SIGTERM
-    (``StopSignals``), then call the node's ``on_shutdown`` if it has one (after the executor
+    (``StopSignals``; the node's ``before_spin``, if it has one, is called first in the thread
+    that spins), then call the node's ``on_shutdown`` if it has one (after the executor
     stopped, so nothing the node publishes follows it; also when a callback raised), clean up;
     parameter errors exit 2. SIGUSR1 prints every thread's Python stack to stderr and the node
     goes on (``dump_stacks_on_signal``)."""
@@ -230,6 +231,8 @@ def run(
         node = node_class()
         spinner = stop.executor = executor()
         spinner.add_node(node)
+        if hasattr(node, "before_spin"):  # in the thread that spins (not in in-process tests)
+            node.before_spin()
         spinner.spin_until_future_complete(stop.future)
     except ValueError as err:  # invalid parameters: say which and stop
         print(f"{node_class.__name__}: {err}", file=sys.stderr)

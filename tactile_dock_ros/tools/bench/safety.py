@@ -1,4 +1,4 @@
-"""The executor under faults on the mock arm over DDS (issue 13 items 3, 4, 6).
+"""The executor under faults on the mock arm over DDS.
 
 executor and mock_hardware run as processes from the mock launch file on a flat floor
 (``tools.safety``); the bench plays the planner and records every command to the arm.
@@ -18,11 +18,20 @@ executor and mock_hardware run as processes from the mock launch file on a flat 
   loaded (each sensor sample republished 10 times, bursts of 10 plans every 0.25 s): the
   intervals between consecutive command stamps and their jitter |interval - period|,
   p50/p99 per repetition, medians over ``--repeats``, loaded / baseline ratios.
+
+``--cpu-burners N`` runs every part beside N busy processes the bench starts (and ends with
+the part; each stops by itself after ``BURNER_CAP_S`` at the latest): the machine under CPU
+load, its load average reported per part. ``--thread-priority`` overrides the executor's
+(0: the normal scheduler) for side-by-side runs.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -33,6 +42,8 @@ from tactile_dock_ros.tools import bringup, safety
 
 PARTS = ("dropout", "envelope", "load", "exit")
 FAST_DIAGNOSTICS = {"executor": {"diagnostics_period": 0.2}}
+BURNER_CAP_S = 1800  # a CPU burner ends itself after this, should the bench die first
+_BURN = "import time\nend = time.monotonic() + {cap}\nwhile time.monotonic() < end:\n    pass\n"
 
 
 def add_arguments(parser) -> None:
@@ -47,6 +58,37 @@ def add_arguments(parser) -> None:
         help="the mock arm's command_timeout, s (exit; default: config/mock.yaml's)",
     )
     parser.add_argument("--log-dir", type=Path, help="node logs (default: a temporary dir)")
+    parser.add_argument(
+        "--cpu-burners",
+        type=int,
+        default=0,
+        help="busy processes started beside each part (CPU load; 0: none)",
+    )
+    parser.add_argument(
+        "--thread-priority",
+        type=int,
+        help="the executor's thread_priority (0: normal scheduler; default: its own)",
+    )
+
+
+@contextlib.contextmanager
+def cpu_burners(count: int):
+    """``count`` processes that keep a core busy until the block ends (or BURNER_CAP_S)."""
+    code = _BURN.format(cap=BURNER_CAP_S)
+    procs = [subprocess.Popen([sys.executable, "-c", code]) for _ in range(count)]
+    try:
+        yield procs
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+
+
+def _executor_overrides(args) -> dict:
+    executor = dict(FAST_DIAGNOSTICS["executor"])
+    if args.thread_priority is not None:
+        executor["thread_priority"] = args.thread_priority
+    return {"executor": executor}
 
 
 def _ms(stats: dict) -> dict:
@@ -56,7 +98,7 @@ def _ms(stats: dict) -> dict:
 def _dropout(args, log_dir: Path) -> dict:
     rng = np.random.default_rng(args.seed)
     rows = []
-    with safety.mock_floor(log_dir / "dropout", FAST_DIAGNOSTICS) as (probe, env, _):
+    with safety.mock_floor(log_dir / "dropout", _executor_overrides(args)) as (probe, env, _):
         for i in range(args.dropouts):
             stream = ("wrench", "pose")[i % 2]
             row = safety.dropout(probe, env, stream, float(rng.uniform(0.0, 0.3)))
@@ -90,7 +132,7 @@ def _dropout(args, log_dir: Path) -> dict:
 
 
 def _envelope(args, log_dir: Path) -> dict:
-    with safety.mock_floor(log_dir / "envelope", FAST_DIAGNOSTICS) as (probe, env, _):
+    with safety.mock_floor(log_dir / "envelope", _executor_overrides(args)) as (probe, env, _):
         result = safety.envelope_scenarios(probe, env)
     for row in result["refusals"]:
         print(f"  {row['scenario']:<36} refused={row['refused']}  {row['detail']}")
@@ -110,7 +152,7 @@ def _load(args, log_dir: Path) -> dict:
         for name, (amplify, burst) in configs.items():
             bringup.isolate_dds()
             with safety.mock_floor(
-                log_dir / f"load_{name}_{r}", FAST_DIAGNOSTICS, False, amplify
+                log_dir / f"load_{name}_{r}", _executor_overrides(args), False, amplify
             ) as (probe, env, processes):
                 pid = processes["executor"].pid
                 result = safety.control_jitter(probe, env, burst, executor_pid=pid)
@@ -152,9 +194,12 @@ def _load(args, log_dir: Path) -> dict:
         f"loaded {rates['loaded']:.0f} Hz; executor CPU baseline {cpu['baseline']:.0f}%, "
         f"loaded {cpu['loaded']:.0f}% of one core"
     )
+    not_ended = {name: sum(run["outcome"] != "NO_CONTACT" for run in runs[name]) for name in runs}
+    print(f"plans not run to their end (aborted or no report): {not_ended}")
     return {
         "runs": runs,
         "table": table,
+        "plans_not_ended": not_ended,
         "executor_wrench_rate_hz": rates,
         "executor_cpu_percent": cpu,
     }
@@ -162,7 +207,7 @@ def _load(args, log_dir: Path) -> dict:
 
 def _exit(args, log_dir: Path) -> dict:
     rng = np.random.default_rng(args.seed)
-    overrides = dict(FAST_DIAGNOSTICS)
+    overrides = _executor_overrides(args)
     if args.command_timeout is not None:
         overrides["mock_hardware"] = {"command_timeout": args.command_timeout}
     rows = []
@@ -203,11 +248,26 @@ def _exit(args, log_dir: Path) -> dict:
 def run(args) -> dict:
     if args.dropouts < 1:
         raise SystemExit("--dropouts must be >= 1")
+    if not 0 <= args.cpu_burners <= 64:
+        raise SystemExit("--cpu-burners must be in [0, 64]")
+    if args.thread_priority is not None and not 0 <= args.thread_priority <= 99:
+        raise SystemExit("--thread-priority must be in [0, 99]")
     log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="bench_safety_"))
-    out = {"parts": args.parts, "log_dir": str(log_dir)}
+    out = {
+        "parts": args.parts,
+        "log_dir": str(log_dir),
+        "cpu_burners": args.cpu_burners,
+        "thread_priority": args.thread_priority,
+        "load_average": {},
+    }
+    parts = {"dropout": _dropout, "envelope": _envelope, "load": _load, "exit": _exit}
     for part in args.parts:
         bringup.isolate_dds()
-        print(f"== {part}")
-        parts = {"dropout": _dropout, "envelope": _envelope, "load": _load, "exit": _exit}
-        out[part] = parts[part](args, log_dir)
+        print(
+            f"== {part}" + (f" beside {args.cpu_burners} CPU burners" if args.cpu_burners else "")
+        )
+        with cpu_burners(args.cpu_burners):
+            out[part] = parts[part](args, log_dir)
+            out["load_average"][part] = os.getloadavg()[0]
+        print(f"{part}: load average (1 min) {out['load_average'][part]:.1f}")
     return out
