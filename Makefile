@@ -25,13 +25,21 @@ PYTEST_ARGS ?=
 # Run-time environment: ament_index finds our share/ directory in the venv prefix.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 
-.PHONY: test setup lint format clean distclean demo
+.PHONY: test test-perturbed setup lint format clean distclean demo
 .DEFAULT_GOAL := test
 
 setup: $(STAMPS)/msgs
 
 test: setup
 	$(PY) -m pytest $(PYTEST_ARGS)
+
+# The suite with the numeric environment of another machine: numba compiled for a generic
+# x86-64 CPU, OpenBLAS forced to an older kernel set, one thread each. A test that passes only
+# on this machine's floating point asserts one seed's coin (docs/testing.md).
+PERTURBED_ENV ?= NUMBA_CPU_NAME=generic OPENBLAS_CORETYPE=Prescott OPENBLAS_NUM_THREADS=1 \
+                 NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1
+test-perturbed: setup
+	env $(PERTURBED_ENV) $(PY) -m pytest $(PYTEST_ARGS)
 
 # One episode on the mock profile: the five nodes as processes (as `ros2 launch ... profile:=mock`
 # would start them), per-cycle progress, result, latency breakdown, episode.png; exit 0 on DOCKED.
