@@ -25,13 +25,39 @@ PYTEST_ARGS ?=
 # Run-time environment: ament_index finds our share/ directory in the venv prefix.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 
-.PHONY: test test-perturbed setup lint format clean distclean demo
+.PHONY: test test-slow test-perturbed colcon-test setup lint format clean distclean demo
 .DEFAULT_GOAL := test
 
 setup: $(STAMPS)/msgs
 
+# The default suite covers every feature end to end; the long statistical checks and the checks
+# of the checks (pytest -m slow) run in CI after it (.ci/run).
 test: setup
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+
+test-slow: setup
+	$(PY) -m pytest -m slow $(PYTEST_ARGS)
+
+# The robot workflow: `colcon build` of this package in a workspace (build/colcon, the venv as
+# its underlay), then `colcon test` of what depends on the installed layout (the CMake install
+# with every message, script and share file; package.xml against the imports) and
+# `colcon test-result`. A broken colcon build or install layout fails here, not on the robot.
+COLCON_WS     = build/colcon-$(ROS_DISTRO)
+COLCON_ENV    = PATH="$(abspath $(VENV))/bin:$$PATH" CMAKE_PREFIX_PATH="$(abspath $(VENV))"
+COLCON_PYTEST = -m "not slow" -k "install_layout or test_package"
+colcon-test: $(STAMPS)/colcon
+	@mkdir -p $(COLCON_WS)/src && ln -sfn $(CURDIR) $(COLCON_WS)/src/tactile_dock_ros
+	cd $(COLCON_WS) && env $(COLCON_ENV) colcon build --packages-select tactile_dock_ros \
+	  --cmake-args -DPython3_EXECUTABLE="$(abspath $(PY))" -Wno-dev > build.log 2>&1 \
+	  || { tail -50 build.log; exit 1; }
+	cd $(COLCON_WS) && env $(COLCON_ENV) PYTEST_ADDOPTS='$(COLCON_PYTEST)' colcon test \
+	  --packages-select tactile_dock_ros --ctest-args -R pytest > test.log 2>&1 \
+	  || { tail -50 test.log; exit 1; }
+	cd $(COLCON_WS) && env $(COLCON_ENV) colcon test-result --verbose
+
+$(STAMPS)/colcon: requirements-colcon.txt | $(STAMPS)/venv
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements-colcon.txt
+	@touch $@
 
 # The suite with the numeric environment of another machine: numba compiled for a generic
 # x86-64 CPU, OpenBLAS forced to an older kernel set, one thread each. A test that passes only

@@ -50,6 +50,7 @@ def test_stale_ids_leave_the_history_and_the_arm_alone(in_process):
     assert plans["well_formed"] > 0 and plans["dropped"] == IN_PROCESS_MESSAGES
 
 
+@pytest.mark.slow  # every subscription's guard is fuzzed in-process by default
 @pytest.mark.dds
 def test_fuzz_over_dds_kills_nothing_and_the_suite_still_docks(tmp_path, in_process):
     expected = set(_topics(in_process))

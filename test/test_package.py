@@ -336,6 +336,7 @@ def test_pytest_loads_a_plugin_with_launch_testing_hook_signature(tmp_path):
     (tmp_path / "legacy_hook_plugin.py").write_text(LEGACY_HOOK_PLUGIN)
     (tmp_path / "test_one.py").write_text("def test_one():\n    pass\n")
     env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    env.pop("PYTEST_ADDOPTS", None)  # the selection of an outer run (make colcon-test)
     args = ["-p", "legacy_hook_plugin", "-p", "no:cacheprovider", "-W", "ignore", "test_one.py"]
     run = subprocess.run(
         [sys.executable, "-m", "pytest", *args],

@@ -189,6 +189,7 @@ MUTATIONS = {
 }
 
 
+@pytest.mark.slow  # each protection's own test runs by default; this checks those tests
 @pytest.mark.parametrize("removed", MUTATIONS)
 def test_each_check_fails_when_its_protection_is_removed(removed, tmp_path, monkeypatch):
     patch, scenario = MUTATIONS[removed]
