@@ -24,6 +24,22 @@ def test_safety_bench_dropout_small(tmp_path):
     assert "envelope" not in report and "load" not in report
 
 
+def test_side_by_side_thread_priorities_beside_cpu_burners(tmp_path):
+    """One dropout per executor thread_priority (0: normal scheduler, 1: SCHED_FIFO where
+    allowed) beside a CPU burner: both runs in one JSON, each with its load average."""
+    out = tmp_path / "safety.json"
+    argv = ["safety", "--parts", "dropout", "--dropouts", "1", "--cpu-burners", "1"]
+    argv += ["--thread-priority", "0", "1", "--log-dir", str(tmp_path / "logs"), "--json", str(out)]
+    assert bench.main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["cpu_burners"] == 1 and set(report["by_thread_priority"]) == {"0", "1"}
+    for run in report["by_thread_priority"].values():
+        assert run["dropout"]["summary"]["stopped"] == 1 and run["load_average"]["dropout"] > 0
+    for bad in (["--thread-priority", "100"], ["--cpu-burners", "-1"]):
+        with pytest.raises(SystemExit):
+            bench.main(["safety", "--parts", "dropout", *bad])
+
+
 def test_stop_latency_without_samples_is_reported_not_raised():
     from tactile_dock_ros.tools import safety
 

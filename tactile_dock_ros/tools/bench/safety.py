@@ -21,8 +21,9 @@ executor and mock_hardware run as processes from the mock launch file on a flat 
 
 ``--cpu-burners N`` runs every part beside N busy processes the bench starts (and ends with
 the part; each stops by itself after ``BURNER_CAP_S`` at the latest): the machine under CPU
-load, its load average reported per part. ``--thread-priority`` overrides the executor's
-(0: the normal scheduler) for side-by-side runs.
+load, its load average reported per part. ``--thread-priority P [P ...]`` runs the parts once
+per value of the executor's thread_priority (0: the normal scheduler), side by side in one
+JSON (``by_thread_priority``).
 """
 
 from __future__ import annotations
@@ -67,7 +68,9 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--thread-priority",
         type=int,
-        help="the executor's thread_priority (0: normal scheduler; default: its own)",
+        nargs="+",
+        help="run once per value of the executor's thread_priority (0: normal scheduler; "
+        "default: its own)",
     )
 
 
@@ -86,8 +89,8 @@ def cpu_burners(count: int):
 
 def _executor_overrides(args) -> dict:
     executor = dict(FAST_DIAGNOSTICS["executor"])
-    if args.thread_priority is not None:
-        executor["thread_priority"] = args.thread_priority
+    if args.priority is not None:
+        executor["thread_priority"] = args.priority
     return {"executor": executor}
 
 
@@ -250,16 +253,25 @@ def run(args) -> dict:
         raise SystemExit("--dropouts must be >= 1")
     if not 0 <= args.cpu_burners <= 64:
         raise SystemExit("--cpu-burners must be in [0, 64]")
-    if args.thread_priority is not None and not 0 <= args.thread_priority <= 99:
-        raise SystemExit("--thread-priority must be in [0, 99]")
+    priorities = args.thread_priority or [None]
+    if any(p is not None and not 0 <= p <= 99 for p in priorities):
+        raise SystemExit("--thread-priority values must be in [0, 99]")
     log_dir = args.log_dir or Path(tempfile.mkdtemp(prefix="bench_safety_"))
-    out = {
-        "parts": args.parts,
-        "log_dir": str(log_dir),
-        "cpu_burners": args.cpu_burners,
-        "thread_priority": args.thread_priority,
-        "load_average": {},
-    }
+    runs = {}
+    for priority in priorities:
+        args.priority = priority
+        name = "default" if priority is None else str(priority)
+        if len(priorities) > 1:
+            print(f"=== executor thread_priority {name}")
+        runs[name] = _run_parts(args, log_dir / f"thread_priority_{name}")
+    out = {"parts": args.parts, "log_dir": str(log_dir), "cpu_burners": args.cpu_burners}
+    if len(priorities) == 1:
+        return out | {"thread_priority": priorities[0]} | runs[name]
+    return out | {"by_thread_priority": runs}
+
+
+def _run_parts(args, log_dir: Path) -> dict:
+    out = {"load_average": {}}
     parts = {"dropout": _dropout, "envelope": _envelope, "load": _load, "exit": _exit}
     for part in args.parts:
         bringup.isolate_dds()
