@@ -7,6 +7,7 @@ nodes make; test_system.py replays a bag recorded from the real node processes.
 import argparse
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.sampling import sample_posterior
 from tactile_dock_ros.execution.types import PlanCommand, Report
 from tactile_dock_ros.nodes import convert
-from tactile_dock_ros.tools import bag, replay
+from tactile_dock_ros.tools import bag, package_files, replay
 
 
 def _settings(**given):
@@ -271,6 +272,27 @@ def test_config_file_sets_the_planner_parameters(recorded, tmp_path):
     settings = _settings(config=config, contact_resolution=0.02, compliant=True)
     assert (settings.config.give_up_threshold, settings.config.contact_resolution) == (0.5, 0.02)
     assert settings.compliant
+
+
+def test_a_relative_config_missing_here_comes_from_the_installed_share(
+    recorded, tmp_path, monkeypatch, capsys
+):
+    """From a colcon workspace the docs' ``--config config/...`` is not under the working
+    directory: the installed share's file is used and named; neither: both places named."""
+    from ament_index_python.packages import get_package_share_directory
+
+    share = Path(get_package_share_directory("tactile_dock_ros"))
+    monkeypatch.chdir(tmp_path)  # no config/ here
+    assert replay.main([str(recorded), "--config", "config/robot.yaml"]) == 0
+    assert f"using {share / 'config' / 'robot.yaml'}" in capsys.readouterr().err
+    assert replay.main([str(recorded), "--config", "config/absent.yaml"]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "config" / "absent.yaml") in err
+    assert str(share / "config" / "absent.yaml") in err
+    # the bench tools' inputs resolve through the same helper
+    assert package_files.resolve("config/perception_mock.yaml", log=None) == (
+        share / "config" / "perception_mock.yaml"
+    )
 
 
 def test_bad_input_is_a_clear_error(recorded, tmp_path, capsys):

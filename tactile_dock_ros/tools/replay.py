@@ -13,7 +13,10 @@ node's inputs are rebuilt: the prior, the posterior samples it planned with and 
 waypoint) and the aim points of the episode's earlier plans (eq. 24). Then
 ``core.planner.plan`` runs again with the planner parameters of ``--config`` (the parameter
 file the robot ran with; the planner node's defaults otherwise), the load direction and motion
-model of the recorded plan, and any override given here. The planner is
+model of the recorded plan, and any override given here. A relative ``--config`` path that does
+not exist from the working directory is taken from the installed package share
+(``tools.package_files``: ``config/robot.yaml`` works from a colcon workspace too); the file
+used is logged. The planner is
 deterministic: with the recorded parameters every replayed plan equals the recorded one, so a
 difference means the code or a parameter changed. ``--resample N`` plans with N fresh posterior
 samples instead (``core.sampling.sample_posterior`` from the prior and history, cold-started,
@@ -37,7 +40,7 @@ from ..core import planner
 from ..core.episode import EpisodeState, PlannerConfig
 from ..core.sampling import METHODS, sample_posterior
 from ..core.shape import GaussianShape
-from . import bag, figures
+from . import bag, figures, package_files
 
 PATH_TOLERANCE_M = 1e-9  # replayed and recorded paths "agree" below this
 
@@ -218,7 +221,8 @@ def settings_from(args: argparse.Namespace) -> Settings:
     names = ("load_direction", "give_up_threshold", "contact_resolution", "compliant")
     values = {name: table[name].default for name in names}
     if args.config is not None:
-        document = yaml.safe_load(Path(args.config).read_text()) or {}
+        path = package_files.resolve(args.config)  # FileNotFoundError names where it looked
+        document = yaml.safe_load(path.read_text()) or {}
         for section in ("/**", "planner", "/planner"):
             values.update(
                 {
@@ -282,7 +286,12 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("bag", type=Path, help="rosbag2 directory")
-    parser.add_argument("--config", type=Path, help="parameter file the planner node ran with")
+    parser.add_argument(
+        "--config",
+        type=Path,
+        help="parameter file the planner node ran with; a relative path missing here is taken "
+        "from the installed package share (e.g. config/robot.yaml)",
+    )
     parser.add_argument("--give-up-threshold", type=float, help="override (probability)")
     parser.add_argument("--contact-resolution", type=float, help="override, metres (w, eq. 24)")
     parser.add_argument(

@@ -72,7 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
-    results = modules[args.suite].run(args)
+    try:
+        results = modules[args.suite].run(args)
+    except FileNotFoundError as err:  # an input file (package_files.resolve names the places)
+        print(f"bench {args.suite}: {err}", file=sys.stderr)
+        return 2
     report = {"suite": args.suite, "argv": sys.argv, "environment": _environment(), **results}
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -51,6 +51,7 @@ from ...core import explore, problems, simulate
 from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.mock_camera import depth_prior
+from .. import package_files
 
 PRIORS = ("problem", "depth")
 MODES = ("compliant", "non-compliant")
@@ -86,8 +87,9 @@ def add_episode_arguments(parser) -> None:
     parser.add_argument(
         "--perception-config",
         type=Path,
-        default=PERCEPTION_CONFIG,
-        help="camera extrinsic + covariance, depth noise (depth prior)",
+        default=Path("config/perception_mock.yaml"),
+        help="camera extrinsic + covariance, depth noise (depth prior); a relative path missing "
+        "here is taken from the installed package share (tools.package_files)",
     )
     parser.add_argument(
         "--give-up-threshold",
@@ -497,7 +499,9 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 def run(args) -> dict:
     instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
-    config = PerceptionConfig.load(args.perception_config) if "depth" in args.prior else None
+    config = None
+    if "depth" in args.prior:
+        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
     truths = {name: _truths(args, name, instances, config) for name in args.problems}
     keys = [
         (name, source, mode, strategy)

@@ -36,6 +36,7 @@ import numpy as np
 
 from tactile_dock_ros.core import explore, planner, problems, reference, sampling, simulate, slides
 from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.tools import package_files
 from tactile_dock_ros.tools.bench.docking import (
     MODES,
     PRIORS,
@@ -321,7 +322,9 @@ def run(args) -> dict:
             f"--references x --particles ({args.references} x {particles}) must be at least "
             f"2 x --samples ({args.samples}): the noise floor compares that many draws"
         )
-    config = PerceptionConfig.load(args.perception_config) if args.prior == "depth" else None
+    config = None
+    if args.prior == "depth":
+        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
     truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
     problem = _problem(args.problem)
     shape = problem.prior if args.prior == "problem" else truth["depth"]

@@ -33,6 +33,7 @@ from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.depth import decode_depth, encode_depth
 from ...perception.render import render_depth
 from ...perception.terrain_prior import perceive
+from .. import package_files
 
 MOCK_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
 IMAGE = (320, 240)
@@ -45,7 +46,13 @@ MODELS = ("independent", "correlated")  # old, new
 def add_arguments(parser) -> None:
     parser.add_argument("--random", type=int, default=150, help="random walls")
     parser.add_argument("--per-problem", type=int, default=20, help="truths per problem")
-    parser.add_argument("--config", type=Path, default=MOCK_CONFIG)
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=Path("config/perception_mock.yaml"),
+        help="perception settings; a relative path missing here is taken from the installed "
+        "package share (tools.package_files)",
+    )
     parser.add_argument("--encoding", default="16UC1", choices=("16UC1", "32FC1"))
     parser.add_argument(
         "--calibration-scale",
@@ -152,7 +159,7 @@ def summarize(rows: list[dict], model: str, kinds: list[str]) -> dict:
 
 
 def run(args) -> dict:
-    config = PerceptionConfig.load(args.config)
+    config = PerceptionConfig.load(package_files.resolve(args.config))
     K = mock_intrinsics()
     rows, failed = [], []
     for i, (label, truth) in enumerate(terrains(args.random, args.per_problem, args.seed)):
