@@ -5,6 +5,7 @@ nodes make; test_system.py replays a bag recorded from the real node processes.
 """
 
 import argparse
+import contextlib
 import dataclasses
 import json
 from pathlib import Path
@@ -127,6 +128,71 @@ def test_every_episode_message_survives_a_bag_round_trip(tmp_path, storage):
     assert list(bag.read(tmp_path / "b")) == written
     files = [p.suffix for p in (tmp_path / "b").iterdir() if p.name != "metadata.yaml"]
     assert files == [{"mcap": ".mcap", "sqlite3": ".db3"}[storage]]
+
+
+def _announced_type_hashes() -> dict:
+    """Topic -> the RIHS01 hash rclpy's publisher of its type announces on the graph."""
+    from ros_helpers import ros_node
+
+    with ros_node("type_hashes") as (node, _):
+        for topic, msgtype in bag.EPISODE_TOPICS.items():
+            node.create_publisher(bag.message_class(msgtype), topic, 1)
+        return {
+            topic: str(node.get_publishers_info_by_topic(topic)[0].topic_type_hash)
+            for topic in bag.EPISODE_TOPICS
+        }
+
+
+@pytest.mark.parametrize("storage", bag.STORAGES)
+def test_a_bag_names_the_ros_distro_and_type_hashes_as_rosbag2_writes_them(
+    tmp_path, storage, monkeypatch
+):
+    """rosbag2 stores $ROS_DISTRO and each topic's RIHS01 hash (metadata.yaml, the bag's own
+    metadata copy; MCAP channels: ``topic_type_hash``). Without ROS_DISTRO (the PyPI wheels)
+    the installed rclpy's distro; the hashes are those rclpy announces."""
+    from importlib.metadata import version
+
+    monkeypatch.delenv("ROS_DISTRO", raising=False)
+    distro = {"7": "jazzy", "9": "kilted"}[version("ros-rclpy").split(".")[0]]
+    announced = _announced_type_hashes()
+    assert all(h.startswith("RIHS01_") for h in announced.values())
+    samples = sample_messages()
+    written = [(t, 1000, samples[k.rsplit("/", 1)[-1]]) for t, k in bag.EPISODE_TOPICS.items()]
+    bag.write(tmp_path / "b", written, storage=storage)
+    info = yaml.safe_load((tmp_path / "b" / "metadata.yaml").read_text())
+    info = info["rosbag2_bagfile_information"]
+    assert info["ros_distro"] == distro
+    in_metadata = {
+        t["topic_metadata"]["name"]: t["topic_metadata"]["type_description_hash"]
+        for t in info["topics_with_message_count"]
+    }
+    assert in_metadata == announced
+    if storage == "mcap":
+        from mcap.reader import make_reader
+
+        (file,) = (tmp_path / "b").glob("*.mcap")
+        with open(file, "rb") as f:
+            reader = make_reader(f)
+            channels = reader.get_summary().channels.values()
+            in_channels = {c.topic: c.metadata.get("topic_type_hash") for c in channels}
+            (record,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+        stored = yaml.safe_load(record.metadata["serialized_metadata"])
+    else:
+        import sqlite3
+
+        (file,) = (tmp_path / "b").glob("*.db3")
+        with contextlib.closing(sqlite3.connect(file)) as db:
+            in_channels = dict(db.execute("SELECT name, type_description_hash FROM topics"))
+            assert db.execute("SELECT ros_distro FROM schema").fetchall() == [(distro,)]
+            (text,) = db.execute("SELECT metadata FROM metadata").fetchone()
+        stored = yaml.safe_load(text)
+    assert in_channels == announced
+    assert stored["ros_distro"] == distro
+    assert list(bag.read(tmp_path / "b")) == written  # still a bag rosbags reads
+    monkeypatch.setenv("ROS_DISTRO", "rolling")  # set (a sourced ROS 2): as rosbag2, that one
+    bag.write(tmp_path / "c", written, storage=storage)
+    info = yaml.safe_load((tmp_path / "c" / "metadata.yaml").read_text())
+    assert info["rosbag2_bagfile_information"]["ros_distro"] == "rolling"
 
 
 def _offered(qos_yaml) -> dict:
