@@ -14,6 +14,18 @@ safety checks (the force limit on the whole 3-D force, out-of-plane pushes inclu
 ``execution.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
 this file is the ROS glue. An ABORTED report carries no segments: what an aborted attempt felt
 is not evidence (a stale sensor or a stopped plan may have misread it).
+
+A managed (lifecycle) node, as ros2_control's and nav2's nodes that drive hardware: configure
+validates the parameters (a bad value fails the transition: ``ValueError`` when autostarting)
+and creates publishers, subscriptions and timers; activate starts the control loop; deactivate
+stops the arm at once (zero command; a running or waiting plan is reported ABORTED, detail
+``DEACTIVATED``) and plans are refused (report ``refused: executor inactive``) until activated
+again; cleanup and shutdown send a zero command and release everything. ``autostart`` (default
+true) configures and activates the node as it starts (``ros2 launch`` with a plain ``<node>``,
+``tools.bringup``, in-process tests); false leaves it unconfigured for a lifecycle manager or
+``ros2 lifecycle set /executor configure``. Decision: configure does not wait for the arm's
+streams (bringup may configure before the drivers are up); it logs whether pose and wrench have
+publishers, and a plan waits up to ``connect_timeout`` for their first samples, as before.
 """
 
 from __future__ import annotations
@@ -24,7 +36,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.duration import Duration
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
@@ -50,9 +62,31 @@ def _tuning(name: str, *spec) -> Param:
 
 
 SEEN_PLANS = 64  # plan keys remembered to ignore resent copies
+DEACTIVATED = "executor deactivated (lifecycle)"  # in the detail of a plan stopped by deactivate
+INACTIVE = "refused: executor inactive"  # the detail of a plan received while not active
 
 
-PARAMS = [
+# Of the process, declared as the node starts: the rest are declared by configure.
+NODE_PARAMS = [
+    Param(
+        "autostart",
+        True,
+        "configure and activate the node as it starts (false: wait for lifecycle transitions, "
+        "e.g. ros2 lifecycle set /executor configure, then activate)",
+    ),
+    Param(
+        "thread_priority",
+        50,
+        "SCHED_FIFO priority of the thread that runs the control loop (0: the normal "
+        "scheduler); as ros2_control's controller manager: needs root or an rtprio limit, "
+        "else a warning and the normal scheduler",
+        "",
+        0,
+        99,
+    ),
+]
+
+CONFIG_PARAMS = [
     *PLANE_TABLE,
     Param("control_rate_hz", 100.0, "guarded-move control rate", "Hz", 1.0, 1000.0),
     Param("max_speed", 0.1, "speed limit of any command", "m/s", 1e-4, 1.0),
@@ -111,51 +145,74 @@ PARAMS = [
         60.0,
     ),
     Param("diagnostics_period", 1.0, "period of the /diagnostics status", "s", 0.05, 60.0),
-    Param(
-        "thread_priority",
-        50,
-        "SCHED_FIFO priority of the thread that runs the control loop (0: the normal "
-        "scheduler); as ros2_control's controller manager: needs root or an rtprio limit, "
-        "else a warning and the normal scheduler",
-        "",
-        0,
-        99,
-    ),
 ]
+PARAMS = [*CONFIG_PARAMS, *NODE_PARAMS]
+SUCCESS, FAILURE = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
 
 
-class ExecutorNode(Node):
+class ExecutorNode(LifecycleNode):
     def __init__(self, **kwargs) -> None:
         super().__init__("executor", **kwargs)
-        self.p = declare(self, PARAMS)
-        if np.any(np.asarray(self.p.workspace_min) >= np.asarray(self.p.workspace_max)):
-            raise ValueError("parameter workspace_min must be below workspace_max")
-        self.plane = plane_frame(self.p)
+        self.node_params = declare(self, NODE_PARAMS)  # ValueError: not started at all
+        self.p = None  # the configured parameters (None: unconfigured)
+        self.active = False  # plans run only while active
+        self.config_error = ""
+        self.cmd_pub = None
+        self.entities: list = []  # what configure created and cleanup destroys
+        if self.node_params.autostart:
+            self.start()
+
+    def start(self) -> None:
+        """configure + activate now (``autostart``); a failed configure raises ValueError."""
+        if self.trigger_configure() != SUCCESS:
+            raise ValueError(self.config_error or "executor: configure failed")
+        if self.trigger_activate() != SUCCESS:
+            raise RuntimeError("executor: activate failed")
+
+    # ---------------------------------------------------------------- lifecycle
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Validate the parameters (FAILURE names the bad one), then create publishers,
+        subscriptions and timers (the control timer stays cancelled until activate)."""
+        try:
+            self.p = p = declare(self, PARAMS)
+            if np.any(np.asarray(p.workspace_min) >= np.asarray(p.workspace_max)):
+                raise ValueError("parameter workspace_min must be below workspace_max")
+        except ValueError as err:
+            self.p, self.config_error = None, str(err)
+            self.get_logger().error(f"configure failed: {err}")
+            return FAILURE
+        self.configure_from(p)
+        self.report_streams("configured")
+        return SUCCESS
+
+    def configure_from(self, p) -> None:
+        self.plane = plane_frame(p)
         self.limits = Limits(
-            np.asarray(self.p.workspace_min),
-            np.asarray(self.p.workspace_max),
-            self.p.max_speed,
-            self.p.max_force,
-            self.p.sensor_timeout,
+            np.asarray(p.workspace_min),
+            np.asarray(p.workspace_max),
+            p.max_speed,
+            p.max_force,
+            p.sensor_timeout,
         )
         self.settings = Settings(
-            contact_resolution=self.p.contact_resolution,
-            waypoint_tolerance=self.p.waypoint_tolerance,
-            slip_tolerance=self.p.slip_tolerance,
-            load_force=self.p.load_force,
-            load_speed=self.p.load_speed,
-            retreat_distance=self.p.retreat_distance,
-            settle_time=self.p.settle_time,
-            max_slide=self.p.max_slide,
-            evidence_spacing=self.p.evidence_spacing,
-            released_fraction=self.p.released_fraction,
-            approach_gain=self.p.approach_gain,
+            contact_resolution=p.contact_resolution,
+            waypoint_tolerance=p.waypoint_tolerance,
+            slip_tolerance=p.slip_tolerance,
+            load_force=p.load_force,
+            load_speed=p.load_speed,
+            retreat_distance=p.retreat_distance,
+            settle_time=p.settle_time,
+            max_slide=p.max_slide,
+            evidence_spacing=p.evidence_spacing,
+            released_fraction=p.released_fraction,
+            approach_gain=p.approach_gain,
         )
-        self.filter = ForceFilter(self.p.filter_cutoff_hz, self.p.bias_samples)
-        self.dt = 1.0 / self.p.control_rate_hz
+        self.filter = ForceFilter(p.filter_cutoff_hz, p.bias_samples)
+        self.dt = 1.0 / p.control_rate_hz
         self.tool: np.ndarray | None = None
         self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
-        self.health = ExecutorHealth(self.p.sensor_timeout, self.dt)
+        self.health = ExecutorHealth(p.sensor_timeout, self.dt)
         self.gate = EpisodeGate()
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
@@ -164,17 +221,119 @@ class ExecutorNode(Node):
         self.seen_plans: dict[tuple[int, int, int], None] = {}
         self.last_plan = (0, 0)  # (episode, plan_id) of the newest plan accepted
         self.plan_heard = (None, 0.0)  # (key, node-clock s) of the newest copy of the run plan
+        # Plain publishers, not lifecycle ones: the zero command must go out in every state
+        # (deactivate, cleanup, exit) and refusals are reported while inactive; nothing but
+        # the control timer, cancelled while inactive, commands a motion.
         self.cmd_pub = self.create_publisher(TwistStamped, "cmd_twist", qos.COMMAND)
         self.report_pub = self.create_publisher(ExecutionReport, "execution_report", qos.REPORTS)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", qos.EVENTS)
-        plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
-        wrench_id = base_id if self.p.wrench_frame == "base" else None  # else the sensor's frame
-        subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id)
-        subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id)
-        subscribe(self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id)
-        subscribe(self, EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED)
-        self.create_timer(self.dt, self.on_tick)
-        self.create_timer(self.p.diagnostics_period, self.publish_diagnostics)
+        plane_id, base_id = p.plane_frame_id, p.base_frame_id
+        wrench_id = base_id if p.wrench_frame == "base" else None  # else the sensor's frame
+        self.control_timer = self.create_timer(self.dt, self.on_tick, autostart=False)
+        self.stream_subs = {
+            "tool_pose": subscribe(
+                self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id
+            ),
+            "wrench": subscribe(
+                self, WrenchStamped, "wrench", self.on_wrench, qos.SENSOR, wrench_id
+            ),
+        }
+        self.entities = [
+            *self.stream_subs.values(),
+            subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id),
+            subscribe(self, EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED),
+            self.control_timer,
+            self.create_timer(p.diagnostics_period, self.publish_diagnostics),
+            self.cmd_pub,
+            self.report_pub,
+            self.diagnostics_pub,
+        ]
+
+    def report_streams(self, what: str) -> None:
+        """Log whether the arm's pose and wrench streams have publishers and samples; a warning,
+        not a failure, when not (drivers may start later: plans wait ``connect_timeout``)."""
+        parts, missing = [], []
+        for stream, sub in self.stream_subs.items():
+            publishers = self.count_publishers(sub.topic_name)
+            heard = self.health.streams[stream].last is not None
+            parts.append(f"{sub.topic_name}: {publishers} publishers, samples {heard}")
+            if not (publishers and heard):
+                missing.append(stream)
+        text = f"{what}; {'; '.join(parts)}"
+        if missing:
+            self.get_logger().warning(
+                f"{text}: {' and '.join(missing)} not flowing yet (a plan waits up to "
+                f"connect_timeout {self.p.connect_timeout} s for them)"
+            )
+        else:
+            self.get_logger().info(text)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Accept plans and run the control loop."""
+        self.active = True
+        self.control_timer.reset()
+        self.report_streams("active")
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the arm now: a running plan is aborted (reported, no segments), a waiting one
+        reported, a zero command sent in this callback; then refuse plans until activated."""
+        self.active = False
+        self.stop(DEACTIVATED)
+        self.control_timer.cancel()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.release()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState | None = None) -> TransitionCallbackReturn:
+        """Two callers. The lifecycle shutdown transition (``state`` given): stop and release.
+        ``common.run`` as the process exits (no ``state``: SIGINT, SIGTERM, an exception in a
+        callback): command zero and wait up to SHUTDOWN_ACK_S for the arm to acknowledge it, as
+        a driver would otherwise go on with the last command until its own timeout."""
+        if state is not None:
+            self.active = False
+            self.release()
+            return super().on_shutdown(state)
+        if self.cmd_pub is not None:
+            self.command(np.zeros(2))
+            self.cmd_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
+        return SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """A transition raised: stop the arm and release; the node is unconfigured after it."""
+        self.active = False
+        self.release()
+        return SUCCESS
+
+    def stop(self, why: str) -> None:
+        """Abort a running plan and drop a waiting one (each reported ABORTED), command zero."""
+        if self.run is not None:
+            if not self.run.done:
+                self.run.abort(f"stopped: {why}", self.tool)
+            self.command(np.zeros(2))
+            self.end_run(now_seconds(self))
+        elif self.pending is not None:
+            plan, self.pending = self.pending[0], None
+            self.report(plan, Outcome.ABORTED, f"stopped before starting: {why}")
+        self.command(np.zeros(2))
+
+    def release(self) -> None:
+        """A zero command, then destroy what configure created (idempotent)."""
+        if self.cmd_pub is None:
+            return
+        self.stop("executor released (lifecycle)")
+        for entity in self.entities:
+            if hasattr(entity, "cancel"):
+                self.destroy_timer(entity)
+            elif hasattr(entity, "publish"):
+                self.destroy_publisher(entity)
+            else:
+                self.destroy_subscription(entity)
+        self.entities, self.cmd_pub, self.p = [], None, None
+
+    # ---------------------------------------------------------------- topics
 
     def on_pose(self, msg: PoseStamped) -> None:
         tool = convert.pose_position(msg, self.plane)
@@ -207,10 +366,11 @@ class ExecutorNode(Node):
         return self.filter.value
 
     def on_plan(self, msg: DockingPlan) -> None:
-        """Run, refuse (with a report) or drop (MessageError: no report) a plan. Decision: a
-        refused or dropped plan changes no state - neither the plan order (``last_plan``) nor
-        the running plan's heartbeat; the running plan's copies are recognised before the
-        bounded ``seen_plans`` is consulted, so no amount of other traffic evicts them."""
+        """Run, refuse (with a report; every DOCK plan while the node is inactive) or drop
+        (MessageError: no report) a plan. Decision: a refused or dropped plan changes no state -
+        neither the plan order (``last_plan``) nor the running plan's heartbeat (it is marked
+        seen: its copies are not refused again); the running plan's copies are recognised
+        before the bounded ``seen_plans`` is consulted, so no other traffic evicts them."""
         plan = convert.plan_from_msg(msg)  # first: a malformed copy must not mark a plan seen
         key = (msg.plan_id, msg.header.stamp.sec, msg.header.stamp.nanosec)
         if key == self.plan_heard[0]:  # the planner resends a plan until its report arrives
@@ -233,6 +393,9 @@ class ExecutorNode(Node):
         if not plan.dock:
             self.last_plan = (plan.episode, plan.plan_id)
             self.get_logger().info(f"plan {plan.plan_id}: GIVE_UP ({plan.reason}); nothing to run")
+            return
+        if not self.active:  # deactivated: nothing moves until activated again
+            self.report(plan, Outcome.ABORTED, INACTIVE)
             return
         if self.busy():  # a second plan is refused, never preempts the running one
             self.report(plan, Outcome.ABORTED, "refused: another plan is running")
@@ -345,7 +508,9 @@ class ExecutorNode(Node):
         self.cmd_pub.publish(convert.twist_to_msg(v3, header(self, self.p.base_frame_id)))
 
     def publish_diagnostics(self) -> None:
-        if self.run is not None:
+        if not self.active:
+            state = "inactive (plans refused)"
+        elif self.run is not None:
             state = f"running plan {self.run.plan.plan_id}"
         elif self.pending is not None:
             state = f"plan {self.pending[0].plan_id} waiting to start"
@@ -393,7 +558,7 @@ class ExecutorNode(Node):
         woke the control loop late (dropout stop p99 65 ms, one 513 ms stall at load 5 on 2
         cores); a SCHED_FIFO thread is woken when its timer fires. The loop waits between
         ticks, so it does not starve the machine (and the kernel keeps 5 % for other tasks)."""
-        priority = self.p.thread_priority
+        priority = self.node_params.thread_priority
         if priority == 0:
             return
         try:
@@ -405,13 +570,6 @@ class ExecutorNode(Node):
             )
             return
         self.get_logger().info(f"control loop thread: SCHED_FIFO priority {priority}")
-
-    def on_shutdown(self) -> None:
-        """Command zero as the node exits (``common.run``: SIGINT, SIGTERM, an exception in a
-        callback) and wait up to SHUTDOWN_ACK_S for the arm to acknowledge it: a driver would
-        otherwise go on with the last command until its own timeout."""
-        self.command(np.zeros(2))
-        self.cmd_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
 
 
 SHUTDOWN_ACK_S = 0.5  # exit waits this long at most for the arm to acknowledge the stop

@@ -67,11 +67,16 @@ class Param:
 
 
 def declare(node: Node, table: list[Param]) -> SimpleNamespace:
-    """Declare every parameter of ``table`` on ``node``; return their validated values."""
+    """Declare every parameter of ``table`` on ``node``; return their validated values. A
+    parameter declared before (a lifecycle node's configure after a cleanup or a failed
+    configure) is read again, not declared twice: its read-only value is validated again."""
     values = {}
     for param in table:
         try:
-            declared = node.declare_parameter(param.name, param.default, param.descriptor())
+            if node.has_parameter(param.name):  # a lifecycle node configured again
+                declared = node.get_parameter(param.name)
+            else:
+                declared = node.declare_parameter(param.name, param.default, param.descriptor())
         except (InvalidParameterValueException, ParameterException, TypeError) as err:
             raise ValueError(f"parameter {param.name}: {err}") from err
         value = declared.value
