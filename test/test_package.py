@@ -41,6 +41,7 @@ ROSDEP_KEYS = {
     "visualization_msgs": "visualization_msgs",
     "diagnostic_msgs": "diagnostic_msgs",
     "rcl_interfaces": "rcl_interfaces",
+    "lifecycle_msgs": "lifecycle_msgs",
     "launch": "launch",
     "launch_testing": "launch_testing",
 }
@@ -80,7 +81,8 @@ SYSTEM_KEYS = {
 ROS_KEYS = {
     "ament_cmake", "ament_cmake_python", "ament_cmake_pytest", "ament_index_python",
     "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "launch", "launch_ros",
-    "launch_testing", "launch_testing_ament_cmake", "launch_xml", "rcl_interfaces", "rclpy",
+    "launch_testing", "launch_testing_ament_cmake", "launch_xml", "lifecycle_msgs",
+    "rcl_interfaces", "rclpy",
     "rosidl_default_generators", "rosidl_default_runtime", "sensor_msgs", "std_msgs", "std_srvs",
     "visualization_msgs",
 }  # fmt: skip
