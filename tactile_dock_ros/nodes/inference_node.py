@@ -352,6 +352,23 @@ class InferenceNode(Node):
             self.get_logger().error(f"warm start: {err}; a restart would sample cold")
 
 
+class DrainingExecutor(MultiThreadedExecutor):
+    """A MultiThreadedExecutor whose ``shutdown`` first lets the callbacks already handed to its
+    threads finish (a running sampler too), then shuts down as rclpy does.
+
+    Decision: rclpy's ``Executor.shutdown`` destroys the executor's guard condition before
+    ``MultiThreadedExecutor.shutdown`` joins the threads, and a callback handler a thread starts
+    after that fails on that guard (``gc.trigger()``) before the callback runs. The error stays
+    in the handler's Task, which nobody reads once spinning stopped, and is printed at exit:
+    "The following exception was never retrieved: cannot use Destroyable because destruction
+    was requested" (seen on SIGINT while reports arrived and the sampler ran). Nothing spins
+    while ``shutdown`` runs, so draining the thread pool first hands out no new work."""
+
+    def shutdown(self, timeout_sec: float | None = None, **kwargs) -> bool:
+        self._executor.shutdown(wait=kwargs.get("wait_for_threads", True))
+        return super().shutdown(timeout_sec, **kwargs)
+
+
 def main(args: list[str] | None = None) -> int:
     # Three threads: the inputs, the sampler and the default group (parameter services).
-    return run(InferenceNode, args, partial(MultiThreadedExecutor, num_threads=3))
+    return run(InferenceNode, args, partial(DrainingExecutor, num_threads=3))
