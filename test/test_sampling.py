@@ -295,7 +295,7 @@ def test_default_hmc_chains_cover_the_samples_without_surplus(n):
         assert per_chain >= 16 and chains * per_chain - n < per_chain
 
 
-# --- seeding that cannot trap chains, and the between-chain diagnostic (issue 12 item 3) ---
+# --- seeding that cannot trap chains, and the between-chain diagnostic ---
 
 KNOWN_BAD_SEEDS = [13, 111]  # before the fix: half the chains in a pocket of ~4e-5 prior mass
 MEAN_TOL = 0.3  # posterior std: every run's marginal means must be this close to rejection's
@@ -392,7 +392,7 @@ def _descent_seeds(problem, history, mean, std):
 
 def _pocket_state(problem, history, mean, std):
     """A feasible state far (> 5 posterior std) from the posterior mean: descents scanning
-    +- 9 std per step (the sampler's before issue 12's fix) land in such pockets 9 of 64 times
+    +- 9 std per step (the sampler's before its seeding fix) land in such pockets 9 of 64 times
     on problem 2."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(sampling, "DESCENT_HALF_WIDTH", 9.0)
