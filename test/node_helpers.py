@@ -1,10 +1,12 @@
 """Build a node of the suite in-process, in its own rclpy context, from launch-file settings."""
 
 import contextlib
+import dataclasses
 from collections.abc import Iterator
 
 import rclpy
 from conftest import REPO_ROOT
+from geometry_msgs.msg import PoseStamped
 from rclpy.context import Context
 from rclpy.node import Node
 
@@ -58,3 +60,72 @@ def node_with_driver(spec, params_dir, extra_args: list[str] = (), executor_clas
         finally:
             executor.shutdown()
             driver.destroy_node()
+
+
+@dataclasses.dataclass
+class PlannerEpisode:
+    """A running episode of the in-process planner (``planner_episode``): its node, the
+    executor spinning it and the driver's publishers and records."""
+
+    node: Node
+    executor: object
+    shape: object  # the sloper problem's prior, published as terrain_prior
+    stamp: object  # a Header stamped after the episode started
+    samples: object  # shape_samples publisher
+    pose: object  # tool_pose publisher
+    statuses: list
+    plans: list
+
+
+@contextlib.contextmanager
+def planner_episode(params_dir) -> Iterator[PlannerEpisode]:
+    """The mock profile's planner in-process, a driver playing the other nodes: the sloper
+    prior published, an episode started, an empty contact history published."""
+    from ros_helpers import spin_until
+    from std_srvs.srv import Trigger
+    from tactile_dock_ros.msg import (
+        ContactHistory,
+        DockingPlan,
+        EpisodeStatus,
+        ShapeDistribution,
+        ShapeSamples,
+    )
+
+    from tactile_dock_ros.core import problems
+    from tactile_dock_ros.core.episode import EpisodeState
+    from tactile_dock_ros.nodes import convert, qos
+
+    spec = launch_nodes("mock")["planner"]
+    statuses, plans = [], []
+    with node_with_driver(spec, params_dir) as (node, driver, executor):
+        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
+        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
+        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
+        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        start = driver.create_client(Trigger, "start_episode")
+        publishers = (prior, history, samples, pose)
+        assert spin_until(
+            executor,
+            lambda: (
+                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
+            ),
+            10.0,
+        )
+        shape = problems.get("sloper").prior
+        prior.publish(convert.shape_to_msg(shape, convert.Header()))
+        assert spin_until(executor, lambda: node.prior is not None, 10.0)
+        future = start.call_async(Trigger.Request())
+        assert spin_until(executor, future.done, 10.0) and future.result().success
+        stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
+        history.publish(convert.history_to_msg(EpisodeState(), stamp))
+        yield PlannerEpisode(node, executor, shape, stamp, samples, pose, statuses, plans)
+
+
+def pose_msg(x: float, y: float, z: float) -> PoseStamped:
+    """A tool pose at (x, y, z) metres in the base frame, identity orientation."""
+    msg = PoseStamped()
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
+    msg.pose.orientation.w = 1.0
+    return msg

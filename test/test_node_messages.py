@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-from node_helpers import launch_nodes, node_with_driver
+from node_helpers import launch_nodes, node_with_driver, planner_episode, pose_msg
 from ros_helpers import spin_until
 from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
 
@@ -23,12 +23,6 @@ def _plan_msg(plan_id, waypoints):
     return convert.plan_to_msg(command, convert.Header(frame_id="dock_plane"))
 
 
-def _pose(x, y, z):
-    msg = PoseStamped()
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
-    return msg
-
-
 def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     spec = launch_nodes("mock")["executor"]
     reports, commands = [], []
@@ -43,7 +37,7 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
         assert spin_until(executor, lambda: plans.get_subscription_count() > 0, 10.0)
 
         # A NaN pose and a NaN wrench are dropped: the tool stays unknown, no bias sample counted.
-        poses.publish(_pose(float("nan"), 0.6, 0.3))
+        poses.publish(pose_msg(float("nan"), 0.6, 0.3))
         wrench = WrenchStamped()
         wrench.wrench.force.x = float("nan")
         wrenches.publish(wrench)
@@ -62,7 +56,7 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
 
         # With a pose but no F/T data the plan waits for it, then aborts with a zero command.
         assert spin_until(executor, lambda: node.tool is not None or poses.publish(
-            _pose(0.0, 0.6, 0.3)), 10.0)  # fmt: skip
+            pose_msg(0.0, 0.6, 0.3)), 10.0)  # fmt: skip
         plans.publish(_plan_msg(3, [[0.0, 0.3], [0.0, 0.1]]))
         assert spin_until(executor, lambda: len(reports) == 2, 10.0)
         second = convert.report_from_msg(reports[1])
@@ -72,7 +66,7 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
 
         # Sensors that stop while a plan runs: the arm is stopped, the report says why.
         def feed():
-            poses.publish(_pose(0.0, 0.6, 0.3))
+            poses.publish(pose_msg(0.0, 0.6, 0.3))
             wrenches.publish(WrenchStamped())
             return node.run is not None and node.filter.ready and not _zero(commands[-1])
 
@@ -129,7 +123,7 @@ def test_executor_stops_a_running_plan(stop, expected, tmp_path):
         plan = _plan_msg(1, [[0.0, 0.3], [0.0, 0.1]])  # episode 0
 
         def feed():  # live sensors and planner, so that only the tested cause stops the plan
-            poses.publish(_pose(0.0, 0.6, 0.3))
+            poses.publish(pose_msg(0.0, 0.6, 0.3))
             wrench = WrenchStamped()
             wrench.wrench.force.y = normal_force[0]  # base y = the plane's normal
             wrenches.publish(wrench)
@@ -252,44 +246,13 @@ def test_planner_needs_a_prior_and_aborts_an_episode_that_gets_no_samples(tmp_pa
 
 
 def test_planner_gives_up_when_inference_finds_no_consistent_shape(tmp_path):
-    from std_srvs.srv import Trigger
-    from tactile_dock_ros.msg import ContactHistory, ShapeDistribution, ShapeSamples
-
-    from tactile_dock_ros.core import problems
-    from tactile_dock_ros.core.episode import EpisodeState
-
-    spec = launch_nodes("mock")["planner"]
-    statuses, plans = [], []
-    with node_with_driver(spec, tmp_path) as (node, driver, executor):
-        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
-        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
-        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
-        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
-        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
-        start = driver.create_client(Trigger, "start_episode")
-        publishers = (prior, history, samples, pose)
-        assert spin_until(
-            executor,
-            lambda: (
-                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
-            ),
-            10.0,
-        )
-        shape = problems.get("sloper").prior
-        prior.publish(convert.shape_to_msg(shape, convert.Header()))
-        assert spin_until(executor, lambda: node.prior is not None, 10.0)
-        future = start.call_async(Trigger.Request())
-        assert spin_until(executor, future.done, 10.0) and future.result().success
-        stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
-        history.publish(convert.history_to_msg(EpisodeState(), stamp))
-        pose.publish(_pose(0.0, 0.6, 0.45))
-        empty = np.zeros((0, shape.n_vertices, 2))
-        samples.publish(convert.samples_to_msg(empty, stamp, "hmc", 0.0, 0))
-        assert spin_until(
-            executor, lambda: statuses and statuses[-1].state == EpisodeStatus.GAVE_UP, 10.0
-        )
-    assert "no shape consistent" in statuses[-1].detail and not plans
+    with planner_episode(tmp_path) as ep:
+        ep.pose.publish(pose_msg(0.0, 0.6, 0.45))
+        empty = np.zeros((0, ep.shape.n_vertices, 2))
+        ep.samples.publish(convert.samples_to_msg(empty, ep.stamp, "hmc", 0.0, 0))
+        gave_up = lambda: ep.statuses and ep.statuses[-1].state == EpisodeStatus.GAVE_UP  # noqa: E731
+        assert spin_until(ep.executor, gave_up, 10.0)
+    assert "no shape consistent" in ep.statuses[-1].detail and not ep.plans
 
 
 def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):

@@ -4,59 +4,21 @@ the next valid samples (planner in-process, ``node_with_driver``)."""
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import PoseStamped
-from node_helpers import launch_nodes, node_with_driver
+from node_helpers import launch_nodes, node_with_driver, planner_episode, pose_msg
 from ros_helpers import spin_until
-from std_srvs.srv import Trigger
-from tactile_dock_ros.msg import (
-    ContactHistory,
-    DockingPlan,
-    EpisodeStatus,
-    ShapeDistribution,
-    ShapeSamples,
-)
+from tactile_dock_ros.msg import EpisodeStatus, ShapeDistribution, ShapeSamples
 
 from tactile_dock_ros.core import problems
-from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.nodes import convert, qos
 
 pytestmark = pytest.mark.dds
 
 
-def _pose(x, y, z):
-    msg = PoseStamped()
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = x, y, z
-    msg.pose.orientation.w = 1.0
-    return msg
-
-
 def test_samples_that_do_not_fit_the_prior_are_dropped_and_the_episode_goes_on(tmp_path):
-    spec = launch_nodes("mock")["planner"]
-    statuses, plans = [], []
-    with node_with_driver(spec, tmp_path) as (node, driver, executor):
-        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
-        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
-        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
-        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
-        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
-        start = driver.create_client(Trigger, "start_episode")
-        publishers = (prior, history, samples, pose)
-        assert spin_until(
-            executor,
-            lambda: (
-                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
-            ),
-            10.0,
-        )
-        shape = problems.get("sloper").prior
-        prior.publish(convert.shape_to_msg(shape, convert.Header()))
-        assert spin_until(executor, lambda: node.prior is not None, 10.0)
-        future = start.call_async(Trigger.Request())
-        assert spin_until(executor, future.done, 10.0) and future.result().success
-        stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
-        history.publish(convert.history_to_msg(EpisodeState(), stamp))
-        assert spin_until(executor, lambda: pose.publish(_pose(0.0, 0.6, 0.45)) or (
+    with planner_episode(tmp_path) as ep:
+        node, executor, shape, stamp, samples = ep.node, ep.executor, ep.shape, ep.stamp, ep.samples
+        statuses, plans = ep.statuses, ep.plans
+        assert spin_until(executor, lambda: ep.pose.publish(pose_msg(0.0, 0.6, 0.45)) or (
             node.episode_state.tool is not None), 10.0)  # fmt: skip
 
         # Right after the new history: 3 vertices against the prior's, then the prior mean
