@@ -15,7 +15,7 @@ from rclpy.node import Node
 from std_msgs.msg import Header
 from tactile_dock_ros.nodes.common import run
 
-SIGNAL, COUNT = getattr(signal, sys.argv[1]), int(sys.argv[2])
+SIGNAL, COUNT, LATE = getattr(signal, sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 
 
 class Busy(Node):
@@ -38,6 +38,11 @@ class Busy(Node):
             raise
 
     def on_shutdown(self):
+        for _ in range(LATE):  # more signals while the node cleans up (a second Ctrl-C)
+            os.kill(os.getpid(), SIGNAL)
+        deadline = time.monotonic() + 0.2
+        while time.monotonic() < deadline:
+            sum(range(100))
         self.pub.publish(Header(frame_id="stop"))  # raises once the context is shut down
         print("on_shutdown: context ok", self.context.ok(), flush=True)
 
@@ -46,9 +51,9 @@ print("exit", run(Busy, []), flush=True)
 """
 
 
-def _run(signal_name: str, count: int) -> list[str]:
+def _run(signal_name: str, count: int, late: int = 0) -> list[str]:
     done = subprocess.run(
-        [sys.executable, "-c", SCRIPT, signal_name, str(count)],
+        [sys.executable, "-c", SCRIPT, signal_name, str(count), str(late)],
         capture_output=True,
         text=True,
         timeout=60.0,
@@ -60,6 +65,17 @@ def _run(signal_name: str, count: int) -> list[str]:
 @pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
 def test_the_first_signal_ends_the_spin_after_the_callback_and_runs_on_shutdown(signal_name):
     assert _run(signal_name, 1) == [
+        "callback finished",
+        "on_shutdown: context ok True",
+        "exit 0",
+    ]
+
+
+@pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
+def test_signals_during_the_cleanup_do_not_cut_on_shutdown_short(signal_name):
+    """A terminal's Ctrl-C and ``ros2 launch`` both forward SIGINT (launch then escalates to
+    SIGTERM): the ones that land while ``run`` cleans up must not skip the stop command."""
+    assert _run(signal_name, 1, late=2) == [
         "callback finished",
         "on_shutdown: context ok True",
         "exit 0",

@@ -180,6 +180,7 @@ class StopSignals:
         self.future: Future = Future()
         self.executor: Executor | None = None
         self.received: list[int] = []
+        self.cleaning_up = False
         read_fd, write_fd = os.pipe()
         os.set_blocking(write_fd, False)
         for signum in STOP_SIGNALS:
@@ -189,8 +190,14 @@ class StopSignals:
 
     def _on_signal(self, signum, frame) -> None:
         self.received.append(signum)
-        if len(self.received) > 1:
+        if len(self.received) > 1 and not self.cleaning_up:
             raise KeyboardInterrupt
+
+    def clean_up(self) -> None:
+        """From here on signals are only counted: ``run``'s cleanup (the node's stop command,
+        destroying it) is short and bounded, and a second Ctrl-C (a terminal and ``ros2
+        launch`` both forward one) must not cut it short; SIGKILL still ends the process."""
+        self.cleaning_up = True
 
     def _watch(self, read_fd: int) -> None:
         while not self.future.done():
@@ -245,6 +252,7 @@ def run(
         if rclpy.ok():
             raise
     finally:
+        stop.clean_up()
         if spinner is not None:
             spinner.shutdown()
         if node is not None:
