@@ -9,6 +9,7 @@ plan, a plan sent while inactive does not move the arm, activate runs plans agai
 
 import numpy as np
 import pytest
+import rclpy
 from geometry_msgs.msg import TwistStamped
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState
@@ -127,3 +128,24 @@ def test_deactivate_stops_the_arm_and_activate_runs_plans_again(tmp_path):
         assert probe.spin_until(lambda: _moving(probe.rec.commands[n:]), 15.0)
         done = probe.report(third, 30.0)
         assert done is not None and done.outcome_name == "NO_CONTACT", done
+
+
+def test_a_destroyed_executor_leaves_the_ros_graph(tmp_path):
+    """rclpy's lifecycle state machine holds the node handle: without destroying it with the
+    node, a destroyed executor stayed in the graph until collected (a second 'executor' that
+    graph queries by name could find first)."""
+    from rclpy.context import Context
+    from ros_helpers import ros_node
+
+    from tactile_dock_ros.nodes.executor_node import ExecutorNode
+
+    with ros_node("graph_probe") as (probe, executor):
+        context = Context()
+        rclpy.init(context=context)
+        node = ExecutorNode(context=context)
+        names = probe.get_node_names_and_namespaces
+        assert spin_until(executor, lambda: ("executor", "/") in names(), 10.0)
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        assert spin_until(executor, lambda: ("executor", "/") not in names(), 10.0)
+        del node  # (kept alive until here: collection must not be what removes it)

@@ -552,6 +552,14 @@ class ExecutorNode(LifecycleNode):
         if outcome is Outcome.ABORTED:
             self.get_logger().warning(f"plan {plan.plan_id}: ABORTED: {detail}")
 
+    def destroy_node(self) -> None:
+        """Destroy the node with its lifecycle state machine. Decision: rclpy's LifecycleNode
+        keeps the state machine, which holds the node handle, until the object is collected, so
+        a destroyed executor stayed in the ROS graph (a second 'executor' that queries by name
+        found first: the fuzz check saw none of its subscriptions)."""
+        super().destroy_node()
+        self._state_machine.destroy_when_not_in_use()
+
     def before_spin(self) -> None:
         """Run the calling thread (the one that spins the control timer, ``common.run``) with
         real-time priority ``thread_priority``. Decision: under CPU load the normal scheduler
