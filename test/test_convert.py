@@ -186,7 +186,7 @@ def test_report_round_trip_and_unknown_outcome():
 def test_message_constants_match_the_ros_free_types():
     assert {s.name: s.value for s in Status} == _constants(ContactSegment)
     assert {o.name: o.value for o in Outcome} == _constants(ExecutionReport)
-    assert dict(zip(convert.EPISODE_STATES, range(5), strict=True)) == _constants(EpisodeStatus)
+    assert dict(zip(convert.EPISODE_STATES, range(6), strict=True)) == _constants(EpisodeStatus)
     assert not {o.value for o in Outcome} & set(_constants(EpisodeCycle).values())
 
 

@@ -41,6 +41,8 @@ def test_reference_lists_parameters_with_unit_and_range_and_the_created_topics(g
     plan = "| `/plan` | `tactile_dock_ros/msg/DockingPlan` | reliable | volatile |"
     assert f"{plan} {qos.EVENTS.depth} |" in publications
     assert "| `/start_episode` | `std_srvs/srv/Trigger` |" in planner
+    assert "Action servers:\n\n| action | type |\n" in planner
+    assert "| `/dock` | `tactile_dock_ros/action/Dock` |" in planner
     # what rclpy creates on every node is not the suite's
     for builtin in ("/parameter_events", "describe_parameters", "get_type_description"):
         assert builtin not in generated

@@ -34,6 +34,7 @@ ROSDEP_KEYS = {
     "rclpy": "rclpy",
     "ament_index_python": "ament_index_python",
     "builtin_interfaces": "builtin_interfaces",
+    "action_msgs": "action_msgs",
     "std_msgs": "std_msgs",
     "std_srvs": "std_srvs",
     "geometry_msgs": "geometry_msgs",
@@ -59,6 +60,8 @@ OTHER_USES = {
     "ament_cmake_python": ("buildtool_depends", "CMakeLists.txt", r"_ament_cmake_python_"),
     "rosidl_default_generators": ("buildtool_depends", "CMakeLists.txt", r"rosidl_generate_"),
     "rosidl_default_runtime": ("exec_depends", "CMakeLists.txt", r"rosidl_default_runtime"),
+    # the generated Dock action's goal/result services and status topic are action_msgs types
+    "action_msgs": ("exec_depends", "CMakeLists.txt", r"DEPENDENCIES .*action_msgs"),
     "launch_xml": ("exec_depends", "launch/*.launch.xml", r"<launch>"),
     "launch_ros": ("exec_depends", "launch/*.launch.xml", r"<node |\$\(find-pkg-share "),
     "ament_cmake_pytest": ("test_depends", "CMakeLists.txt", r"ament_add_pytest_test\("),
@@ -79,7 +82,7 @@ SYSTEM_KEYS = {
     "python3-catkin-pkg", "python3-packaging", "python3-ruff-pip", "python3-numba",
 }  # fmt: skip
 ROS_KEYS = {
-    "ament_cmake", "ament_cmake_python", "ament_cmake_pytest", "ament_index_python",
+    "action_msgs", "ament_cmake", "ament_cmake_python", "ament_cmake_pytest", "ament_index_python",
     "builtin_interfaces", "diagnostic_msgs", "geometry_msgs", "launch", "launch_ros",
     "launch_testing", "launch_testing_ament_cmake", "launch_xml", "lifecycle_msgs",
     "rcl_interfaces", "rclpy",

@@ -2,8 +2,9 @@
 
 A journal as a killed planner leaves it: the episode started, a DOCK plan published, no report
 yet. A planner started on it republishes the episode id, reports RUNNING with the cycle, and
-resends the very plan (same id and stamp: the executor sees copies, not a new plan); an old
-journal (older than resume_timeout) ends the episode ABORTED instead.
+resends the very plan (same id and stamp: the executor sees copies, not a new plan) and keeps
+the overrides of the episode's dock goal; an old journal (older than resume_timeout) ends the
+episode ABORTED instead.
 """
 
 import base64
@@ -24,7 +25,9 @@ pytestmark = pytest.mark.dds
 EPISODE = 77
 
 
-def _journal(directory, age_s: float) -> DockingPlan:
+def _journal(directory, age_s: float, settings: dict | None = None) -> DockingPlan:
+    """A killed planner's journal; ``settings``: its dock goal's (None: a journal written
+    before goals had any)."""
     command = PlanCommand(
         1, True, np.array([[0.0, 0.3], [0.0, 0.1]]), np.array([0.0, -1.0]), 3.0, 0.1, False,
         0.4, 0.4, 2, "", np.array([0.0, 0.1]), EPISODE, 0,
@@ -34,7 +37,8 @@ def _journal(directory, age_s: float) -> DockingPlan:
     plan = convert.plan_to_msg(command, header)
     wall = time.time() - age_s
     events = [
-        {"event": "start", "episode": EPISODE, "start_ns": 10**9, "wall_time": wall},
+        {"event": "start", "episode": EPISODE, "start_ns": 10**9, "wall_time": wall}
+        | ({} if settings is None else {"settings": settings}),
         {
             "event": "plan", "history_length": 0, "p_dock": 0.4, "inference_s": 0.1,
             "planning_s": 0.01, "plan_stamp": 1234.0, "dock": True, "target": [0.0, 0.1],
@@ -65,6 +69,15 @@ def test_a_restarted_planner_resumes_the_running_episode(tmp_path):
         assert status.cycles[0].outcome == EpisodeCycle.PENDING  # its plan is executing
         assert all(p == plan for p in plans)  # copies of the journaled plan, its stamp included
         np.testing.assert_array_equal(node.episode_state.targets, [[0.0, 0.1]])
+        assert node.settings["max_cycles"] == node.p.max_cycles  # no settings: the parameters
+
+
+def test_a_resumed_episode_keeps_its_goal_overrides(tmp_path):
+    settings = {"max_cycles": 3, "give_up_threshold": 0.05, "compliant": True}
+    _journal(tmp_path / "state", age_s=1.0, settings=settings)
+    with _planner(tmp_path) as (node, _, _):
+        assert node.state == "RUNNING" and node.settings == settings
+        assert node.config.give_up_threshold == 0.05 and node.config.compliant
 
 
 def test_an_old_journal_is_not_resumed(tmp_path):

@@ -1,6 +1,7 @@
 """security/policy.xml, the SROS2 access-control policy: a well-formed sros2 policy, one enclave
-per node of the launch file, and each node allowed exactly the topics and services it uses
-(read from the running node's graph, so a publisher added to a node without the policy fails)."""
+per node of the launch file, and each node allowed exactly the topics, services and actions it
+uses (read from the running node's graph, so a publisher added to a node without the policy
+fails)."""
 
 import xml.etree.ElementTree as ET
 
@@ -18,6 +19,9 @@ LISTS = {
     "services": ("service", ("reply", "request")),
     "actions": ("action", ("call", "execute")),
 }
+# What sros2's permissions template grants for an action: its topics and services.
+ACTION_TOPICS = ("/_action/feedback", "/_action/status")
+ACTION_SERVICES = ("/_action/send_goal", "/_action/cancel_goal", "/_action/get_result")
 SIM_TIME = {"/clock"}  # subscribed only with use_sim_time: allowed, not required
 # what only one enclave may publish: the forgeries that would fail an episode
 SOLE_PUBLISHERS = {
@@ -58,13 +62,22 @@ def profiles() -> dict[str, ET.Element]:
 
 
 def allowed(profile: ET.Element) -> dict[str, set[str]]:
-    """Permission (publish, subscribe, reply, ...) -> absolute names the profile allows."""
+    """Permission (publish, subscribe, reply, request; call, execute: the actions) -> absolute
+    names the profile allows; an action's topics and services are added as sros2 grants them
+    (execute: publish and reply, call: subscribe and request)."""
     out = {kind: set() for _, kinds in LISTS.values() for kind in kinds}
     ns, node = profile.get("ns"), profile.get("node")
     for element in profile:
         for kind in LISTS.get(element.tag, ((), ()))[1]:  # comments have no permissions
             if element.get(kind) == ALLOW:
                 out[kind] |= {resolve(e.text.strip(), ns, node) for e in element}
+    for kind, topics, services in (
+        ("execute", "publish", "reply"),
+        ("call", "subscribe", "request"),
+    ):
+        for action in out[kind]:
+            out[topics] |= {action + suffix for suffix in ACTION_TOPICS}
+            out[services] |= {action + suffix for suffix in ACTION_SERVICES}
     return out
 
 
@@ -113,14 +126,17 @@ def test_each_suite_topic_has_one_publishing_enclave():
     assert set(shared) == {"/rosout", "/parameter_events"}
 
 
-def test_the_operator_may_only_call_the_two_suite_services():
+def test_the_operator_may_only_call_the_dock_action_and_the_two_suite_services():
     by_path = profiles()
     operator = allowed(by_path[OPERATOR])
-    assert operator["request"] == {"/start_episode", "/perception/capture"}
+    assert operator["call"] == {"/dock"} and not operator["execute"]
+    dock = {"/dock" + suffix for suffix in ACTION_SERVICES}
+    assert operator["request"] == {"/start_episode", "/perception/capture"} | dock
     assert operator["publish"] == {"/rosout", "/parameter_events"}
-    assert operator["subscribe"] <= SIM_TIME
-    replies = set().union(*(allowed(p)["reply"] for k, p in by_path.items() if k != OPERATOR))
-    assert operator["request"] <= replies
+    assert operator["subscribe"] - SIM_TIME == {"/dock" + suffix for suffix in ACTION_TOPICS}
+    others = [allowed(p) for k, p in by_path.items() if k != OPERATOR]
+    assert operator["request"] <= set().union(*(p["reply"] for p in others))
+    assert operator["call"] <= set().union(*(p["execute"] for p in others))
 
 
 def names(pairs) -> set[str]:
@@ -145,4 +161,3 @@ def test_a_node_uses_exactly_what_its_enclave_allows(profile, name, tmp_path):
     assert subscribed - SIM_TIME == policy["subscribe"] - SIM_TIME
     assert served == policy["reply"]
     assert called == policy["request"]
-    assert not policy["call"] and not policy["execute"]

@@ -1,10 +1,13 @@
 """System test: the five nodes of the mock launch file as separate processes, over DDS.
 
 The executables, parameters and remappings come from launch/tactile_dock.launch.xml
-(profile:=mock), so this runs what `ros2 launch` would. A seeded feasible terrain docks within
-the planner's cycle budget; an infeasible one ends GAVE_UP, and its recorded bag replays offline
-to the very plans the planner published; the executor's commands stay within its speed limit and
-the tool within its workspace box throughout.
+(profile:=mock), so this runs what `ros2 launch` would. Episodes are goals of the planner's
+`/dock` action. A seeded feasible terrain docks within the planner's cycle budget, with feedback
+on every cycle and the docked point in the result; an infeasible one ends GAVE_UP, and its
+recorded bag replays offline to the very plans the planner published; the executor's commands
+stay within its speed limit and the tool within its workspace box throughout. A goal canceled
+while the arm moves ends CANCELED: the arm is commanded zero within two control periods of the
+CANCELED status and the contact history is kept.
 """
 
 import json
@@ -13,10 +16,12 @@ import numpy as np
 import pytest
 import rclpy
 import yaml
+from action_msgs.msg import GoalStatus
 from conftest import REPO_ROOT
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from tactile_dock_ros.msg import EpisodeStatus
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.execution.types import PlaneFrame
@@ -32,7 +37,9 @@ MAX_CYCLES = CONFIG["planner"]["ros__parameters"]["max_cycles"]
 FEASIBLE_SEED, INFEASIBLE_SEED = 0, 5
 
 
-def _episode(tmp_path, seed: int):
+def _episode(tmp_path, seed: int, drive=None):
+    """Run the mock profile on the sloper truth of ``seed``; ``drive(client, executor)`` runs
+    the episode (default: ``client.run``, the empty goal to its result) and returns its record."""
     arguments = {
         "profile": "mock",
         "problem": "sloper",
@@ -48,7 +55,10 @@ def _episode(tmp_path, seed: int):
     executor.add_node(client)
     try:
         with bringup.running(arguments, tmp_path):
-            record = client.run(executor, timeout_s=240.0, progress=print)
+            if drive is None:
+                record = client.run(executor, timeout_s=240.0, progress=print)
+            else:
+                record = drive(client, executor)
     finally:
         executor.shutdown()
         client.destroy_node()
@@ -78,12 +88,37 @@ def test_seeds_are_what_the_test_claims():
     assert feasible(sloper, truth[FEASIBLE_SEED]) and not feasible(sloper, truth[INFEASIBLE_SEED])
 
 
+def _assert_feedback_per_cycle(record):
+    """The result matches the episode the topics showed, and every cycle had feedback: at its
+    plan (P_dock, target as planned) and at its end (its report's outcome)."""
+    result = record.result
+    assert result.cycles == len(record.plans) and result.episode == record.status.episode
+    assert result.reason == record.status.detail
+    assert [f.cycle for f in record.feedback] == sorted(f.cycle for f in record.feedback)
+    for plan in record.plans:
+        mine = [f for f in record.feedback if f.cycle == plan.plan_id]
+        assert mine, f"no feedback on cycle {plan.plan_id}"
+        assert all(f.docking_probability == plan.docking_probability for f in mine)
+        report = [r for r in record.reports if r.plan_id == plan.plan_id]
+        if report:  # a DOCK decision: its attempt's outcome and evidence
+            assert mine[-1].outcome == report[0].outcome
+            assert mine[-1].segments == len(report[0].segments)
+    assert record.feedback[-1].state == result.outcome
+
+
 def test_feasible_terrain_docks_within_the_cycle_budget(tmp_path):
     record, tool = _episode(tmp_path, FEASIBLE_SEED)
     assert record.state == "DOCKED", _logs(tmp_path)
     assert 1 <= len(record.plans) <= MAX_CYCLES
     assert len(record.reports) == len(record.plans)
     _assert_within_limits(record, tool)
+    _assert_feedback_per_cycle(record)
+    assert record.goal_status == GoalStatus.STATUS_SUCCEEDED
+    stop = record.reports[-1].stop_point
+    point, load = record.result.docked_point, record.result.load
+    assert (point.x, point.y) == (stop.x, stop.y)
+    planner = CONFIG["planner"]["ros__parameters"]
+    assert [load.x, load.y] == planner["load_direction"]
 
 
 def test_infeasible_terrain_ends_gave_up(tmp_path):
@@ -91,6 +126,8 @@ def test_infeasible_terrain_ends_gave_up(tmp_path):
     assert record.state == "GAVE_UP", _logs(tmp_path)
     assert all(r.outcome != r.DOCKED for r in record.reports)
     _assert_within_limits(record, tool)
+    _assert_feedback_per_cycle(record)
+    assert record.goal_status == GoalStatus.STATUS_ABORTED  # the result's outcome says GAVE_UP
     # The episode's bag replays offline to exactly the plans the planner node published; it
     # offers each topic with the QoS its publisher offered (latched ones latched).
     bag.write(tmp_path / "bag", record.messages, offered=record.offered_qos)
@@ -106,3 +143,68 @@ def test_infeasible_terrain_ends_gave_up(tmp_path):
     assert replay.main([str(tmp_path / "bag"), "--config", str(config), "--json", str(out)]) == 0
     rows = json.loads(out.read_text())
     assert len(rows) == len(record.plans) and all(r["same"] for r in rows), rows
+
+
+def _zero(command: TwistStamped) -> bool:
+    v = command.twist.linear
+    return (v.x, v.y, v.z) == (0.0, 0.0, 0.0)
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def test_a_goal_canceled_mid_move_ends_canceled_stops_the_arm_and_keeps_the_history(tmp_path):
+    commands, at_cancel = [], {}
+
+    def drive(client, executor):
+        client.create_subscription(TwistStamped, "/arm/cmd_twist", commands.append, qos.COMMAND)
+        record = client.record
+        client.start(executor, timeout_s=240.0)
+
+        # Mid-move on a plan after the first, so that the history has rows to keep.
+        def mid_move() -> bool:
+            return record.state in episode.FINAL_STATES or (
+                len(record.plans) >= 2 and bool(commands) and not _zero(commands[-1])
+            )
+
+        assert client.spin_until(executor, mid_move, 240.0), _logs(tmp_path)
+        at_cancel["plan"] = record.plans[-1].plan_id
+        at_cancel["history"] = convert.history_from_segments(record.history.segments)
+        cancel = client.goal.cancel_goal_async()
+        assert client.wait_result(executor, 30.0), _logs(tmp_path)
+        assert client.spin_until(executor, cancel.done, 10.0)
+        at_cancel["accepted"] = len(cancel.result().goals_canceling) == 1
+        # The executor reports the plan that ran, the latest command is zero, the final status
+        # arrived.
+        reported = lambda: any(r.plan_id == at_cancel["plan"] for r in record.reports)  # noqa: E731
+        final = lambda: record.status.state == record.result.outcome  # noqa: E731
+        stopped = lambda: _zero(commands[-1])  # noqa: E731
+        ended = lambda: reported() and final() and stopped()  # noqa: E731
+        assert client.spin_until(executor, ended, 10.0), _logs(tmp_path)
+        return record
+
+    record, _ = _episode(tmp_path, INFEASIBLE_SEED, drive)
+    if not at_cancel["accepted"]:  # it ended on its own first (a GIVE_UP decision)
+        assert record.state in episode.FINAL_STATES and record.state != "CANCELED"
+        pytest.skip(f"the episode ended {record.state} before the cancel")
+    assert record.goal_status == GoalStatus.STATUS_CANCELED
+    assert record.state == "CANCELED" and record.status.state == EpisodeStatus.CANCELED
+    assert record.result.episode == record.status.episode
+    assert record.result.cycles == len(record.plans)
+    # The arm: zero within two control periods of the CANCELED status (both stamped with this
+    # machine's clock), never moved after that.
+    period = 1.0 / EXECUTOR["control_rate_hz"]
+    canceled = _stamp(record.status)
+    before = [c for c in commands if _stamp(c) <= canceled]
+    assert all(_zero(c) for c in commands if _stamp(c) > canceled + 2 * period)
+    if before and not _zero(before[-1]):  # it was moving (the plan had not ended by itself)
+        stops = [_stamp(c) - canceled for c in commands if _stamp(c) > canceled and _zero(c)]
+        assert stops and stops[0] <= 2 * period, stops[:3]
+    # Nothing is lost from the history (an aborted attempt adds no evidence).
+    history = convert.history_from_segments(record.history.segments)
+    kept = len(at_cancel["history"].status)
+    assert len(history.status) >= kept
+    np.testing.assert_array_equal(history.a[:kept], at_cancel["history"].a)
+    np.testing.assert_array_equal(history.b[:kept], at_cancel["history"].b)
+    np.testing.assert_array_equal(history.status[:kept], at_cancel["history"].status)

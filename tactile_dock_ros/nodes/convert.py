@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
+from tactile_dock_ros.action import Dock
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.shape import GaussianShape
@@ -385,7 +386,7 @@ def episode_from_msg(msg) -> int:
 
 # EpisodeStatus.state constants by name (the planner's states); a cycle's outcome is an Outcome
 # name, INTERRUPTED (the executor stopped it because the planner fell silent) or '' (no report).
-EPISODE_STATES = ("IDLE", "RUNNING", "DOCKED", "GAVE_UP", "ABORTED")
+EPISODE_STATES = ("IDLE", "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "CANCELED")
 INTERRUPTED = "INTERRUPTED"
 _STATE_NAMES = {getattr(EpisodeStatus, name): name for name in EPISODE_STATES}
 _CYCLE_OUTCOMES = {
@@ -433,6 +434,34 @@ def episode_status_from_msg(msg: EpisodeStatus) -> tuple[str, int]:
     if msg.state not in _STATE_NAMES:
         raise MessageError(f"unknown episode state {msg.state}")
     return _STATE_NAMES[msg.state], int(msg.episode)
+
+
+def dock_feedback(state: str, cycles) -> Dock.Feedback:
+    """The /dock action's feedback on the last of ``cycles`` (the planner's records, as
+    ``episode_status_to_msg`` takes them, plus ``target``: the plan's aim point or None and,
+    once reported, ``segments``: the evidence rows the attempt added)."""
+    cycle = cycles[-1]
+    return Dock.Feedback(
+        cycle=len(cycles),
+        state=getattr(EpisodeStatus, state),
+        docking_probability=float(cycle["p_dock"]),
+        target=_point((0.0, 0.0) if cycle.get("target") is None else cycle["target"]),
+        outcome=_CYCLE_OUTCOMES[cycle.get("outcome", "")],
+        segments=int(cycle.get("segments", 0)),
+    )
+
+
+def dock_result(state: str, episode: int, cycles: int, reason: str, docked=None, load=None):
+    """The /dock action's result; ``docked``, ``load``: plane 2-vectors of a DOCKED episode (the
+    report's stop point, the load direction), None otherwise (zero in the message)."""
+    return Dock.Result(
+        outcome=getattr(EpisodeStatus, state),
+        episode=int(episode),
+        cycles=int(cycles),
+        docked_point=_point((0.0, 0.0) if docked is None else docked),
+        load=Vector3() if load is None else Vector3(x=float(load[0]), y=float(load[1]), z=0.0),
+        reason=reason,
+    )
 
 
 def episode_cycles_from_msg(msg: EpisodeStatus) -> list[dict]:

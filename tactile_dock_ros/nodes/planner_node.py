@@ -1,43 +1,57 @@
 """planner: docking plans from posterior samples (paper Sec. V-B), and the episode loop.
 
-An episode starts with the ``start_episode`` service (std_srvs/Trigger), refused while one runs or
-before a ``terrain_prior`` arrived: the node publishes a new id on ``episode`` (latched), which
-empties inference's history. The id is the node clock's milliseconds at the start, mod 2^32, so a
+An episode starts with a goal of the ``dock`` action (``Dock.action``: overrides of max_cycles,
+give_up_threshold and compliant for this episode; feedback at each plan and report; the result),
+or with the ``start_episode`` service (std_srvs/Trigger), a thin wrapper kept for simple scripts
+that starts the same episode as an empty goal. Both are refused while an episode runs or before a
+``terrain_prior`` arrived, a goal also when a field is out of range (the reason is logged; a
+refused goal or call changes nothing). Decisions: the planner serves the action because it owns
+the episode (its id, cycles, budget and end); a second goal is rejected, not preempting (the arm
+may be mid-move on the first: a caller that wants another hold cancels first); cancel ends the
+episode CANCELED, the executor stops the arm as for any episode that leaves RUNNING and inference
+keeps the history. The node publishes a new id on ``episode`` (latched), which empties
+inference's history. The id is the node clock's milliseconds at the start, mod 2^32, so a
 restarted planner never reuses one; plans carry it, and reports of other episodes (a late report, a
 restarted node) are ignored. Each cycle it waits for ``shape_samples`` conditioned on the whole
 current ``contact_history`` (stamped after the episode start) and the tool position (``tool_pose``),
 calls ``core.planner.plan`` and publishes a ``plan`` (DockingPlan). What it plans on is one
 ``core.episode.EpisodeState`` (the history with each row's plan id, the tool position, the aim
-points of the episode's plans) and one ``PlannerConfig`` (the parameters, mapped once by
-``planner_config``). The executor's ``execution_report`` ends the cycle. The episode ends DOCKED (a
-report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports without docking) or
-ABORTED (the executor aborted). ``episode_status`` (EpisodeStatus, latched) carries the state, the
-prior's vertex count (0: none yet) and each cycle's P_dock, latencies and outcome.
+points of the episode's plans) and one ``PlannerConfig`` (the parameters and the goal's
+overrides, mapped by ``planner_config``). The executor's ``execution_report`` ends the cycle. The
+episode ends DOCKED (a report says so), GAVE_UP (the planner's decision, or ``max_cycles`` reports
+without docking), ABORTED (the executor aborted) or CANCELED. ``episode_status`` (EpisodeStatus,
+latched) carries the state, the prior's vertex count (0: none yet) and each cycle's P_dock,
+latencies and outcome.
 
-Restart without loss: with ``state_directory`` set, the episode's events (start, each plan with
-its serialized message, each report's outcome, the end) go to a journal (``nodes.journal``,
-``<state_directory>/planner.jsonl``, replaced at each start). A restarted planner replays it:
-the same episode id (republished, so inference keeps its history), cycles, aim points (eq. 24)
-and the plan being executed, which it resends again; a RUNNING episode whose last event is older
-than ``resume_timeout`` (wall clock) is not resumed but ends ABORTED. An attempt the executor
-stopped because this node fell silent (``Report.producer_lost``) ends its cycle without ending
-the episode: the next plan is made once inference has the attempt's evidence.
+Restart without loss: with ``state_directory`` set, the episode's events (start with the goal's
+settings, each plan with its serialized message, each report's outcome, the end) go to a journal
+(``nodes.journal``, ``<state_directory>/planner.jsonl``, replaced at each start). A restarted
+planner replays it: the same episode id (republished, so inference keeps its history), settings,
+cycles, aim points (eq. 24) and the plan being executed, which it resends again (the action goal
+does not survive a restart: its client watches ``episode_status``); a RUNNING episode whose last
+event is older than ``resume_timeout`` (wall clock) is not resumed but ends ABORTED. An attempt
+the executor stopped because this node fell silent (``Report.producer_lost``) ends its cycle
+without ending the episode: the next plan is made once inference has the attempt's evidence.
 """
 
 from __future__ import annotations
 
 import base64
+import dataclasses
 import secrets
 import time
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.task import Future
 from rclpy.time import Time
 from std_msgs.msg import UInt32
 from std_srvs.srv import Trigger
 
+from tactile_dock_ros.action import Dock
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.planner import plan as plan_docking
 from tactile_dock_ros.execution.types import PlanCommand
@@ -84,6 +98,9 @@ PARAMS = [
 ]
 
 
+GOAL_OVERRIDES = ("max_cycles", "give_up_threshold", "compliant")  # Dock goal fields
+
+
 def planner_config(p) -> PlannerConfig:
     """The planner parameters (``PARAMS`` values, by attribute) as ``core.planner`` settings:
     the one mapping, shared with ``tools.replay``."""
@@ -98,6 +115,34 @@ def planner_config(p) -> PlannerConfig:
     )
 
 
+def goal_settings(goal: Dock.Goal, p) -> dict:
+    """The episode settings (``GOAL_OVERRIDES`` names -> values) of a dock goal: its nonzero
+    fields, checked against the ranges of the parameters they override (``PARAMS``), else the
+    parameters ``p``. ValueError with the reason for a goal the planner must reject.
+    Decision: 0 selects the parameter, so the empty goal runs the node's episode; NaN is
+    refused like any non-finite value (a give_up_threshold of 0, never giving up, is only
+    available as the parameter)."""
+    if goal.hold_id != 0:
+        raise ValueError(
+            f"hold_id {goal.hold_id}: the planner keeps only the latest terrain_prior (hold_id 0)"
+        )
+    settings = {name: getattr(p, name) for name in GOAL_OVERRIDES}
+    table = {param.name: param for param in PARAMS}
+    for name in ("max_cycles", "give_up_threshold"):
+        value = getattr(goal, name)
+        if value != 0:  # NaN included
+            try:
+                table[name].check(value)
+            except ValueError as err:
+                raise ValueError(f"override of the {err}") from None
+            settings[name] = value
+    if goal.compliant > Dock.Goal.NON_COMPLIANT:
+        raise ValueError(f"compliant {goal.compliant} is not a COMPLIANT_* constant of the goal")
+    if goal.compliant != Dock.Goal.COMPLIANT_DEFAULT:
+        settings["compliant"] = goal.compliant == Dock.Goal.COMPLIANT
+    return settings
+
+
 def new_nonce() -> int:
     """A random nonzero 63-bit episode nonce (``watchdog.EpisodeGate.authentic``). Decision:
     from the operating system's entropy, not a seeded generator: it must differ between
@@ -107,13 +152,14 @@ def new_nonce() -> int:
 
 RESEND_PERIOD = 0.5  # seconds between copies of the plan being executed (executor heartbeat)
 RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORTED", "IDLE"
+CANCELED = "CANCELED"
 
 
 class PlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("planner", **kwargs)
         self.p = declare(self, PARAMS)
-        self.config = planner_config(self.p)
+        self.configure(goal_settings(Dock.Goal(), self.p))
         self.plane = plane_frame(self.p)
         self.prior = None
         # history with each row's plan (from contact_history), tool (tool_pose), aim points
@@ -126,6 +172,8 @@ class PlannerNode(Node):
         self.awaiting_plan = None  # plan_id being executed
         self.cycles: list[dict] = []
         self.episode_start = None
+        self.goal = None  # the dock goal of the running episode (None: start_episode, resumed)
+        self.goal_ends: dict[bytes, Future] = {}  # goal id -> (state, Dock.Result), by finish
         self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
         self.status_pub = self.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
@@ -140,6 +188,15 @@ class PlannerNode(Node):
         for subscription in subscriptions:
             subscribe(self, *subscription)
         self.create_service(Trigger, "start_episode", self.on_start)
+        ActionServer(
+            self,
+            Dock,
+            "dock",
+            execute_callback=self.execute_dock,
+            goal_callback=self.on_goal,
+            handle_accepted_callback=self.on_goal_accepted,
+            cancel_callback=self.on_cancel,
+        )
         self.create_timer(RESEND_PERIOD / 2, self.on_timer)
         self.last_plan = None  # (msg, node-clock seconds when last sent)
         self.stage_start = None  # node-clock seconds when the current wait began
@@ -196,29 +253,94 @@ class PlannerNode(Node):
                 vertices, msg.num_vertices, self.prior.mean, self.prior.basis
             )
 
-    def on_start(self, request, response):
+    # ------------------------------------------------------------------ starting an episode
+
+    def refusal(self, goal: Dock.Goal) -> tuple[str, dict | None]:
+        """('' and the episode settings) when ``goal`` may start an episode now, else (why,
+        None). Changes nothing."""
         if self.state == RUNNING:
-            response.success, response.message = False, f"episode {self.episode} is running"
-            return response
+            return f"episode {self.episode} is running", None
         if self.prior is None:
-            response.success = False
-            response.message = "no terrain_prior yet (robot profile: call /perception/capture)"
-            self.get_logger().warning(f"start_episode refused: {response.message}")
+            return "no terrain_prior yet (robot profile: call /perception/capture)", None
+        try:
+            return "", goal_settings(goal, self.p)
+        except ValueError as err:
+            return str(err), None
+
+    def on_start(self, request, response):
+        """start_episode: the episode of an empty dock goal, without feedback or result."""
+        why, settings = self.refusal(Dock.Goal())
+        if settings is None:
+            self.get_logger().warning(f"start_episode refused: {why}")
+            response.success, response.message = False, why
             return response
+        self.start(settings)
+        response.success, response.message = True, f"episode {self.episode} started"
+        return response
+
+    def on_goal(self, goal: Dock.Goal) -> GoalResponse:
+        why, settings = self.refusal(goal)
+        if settings is None:
+            self.get_logger().warning(f"dock goal rejected: {why}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def on_goal_accepted(self, goal_handle) -> None:
+        """Start the goal's episode. rclpy calls this right after ``on_goal`` accepted, in the
+        same callback: no other goal or start_episode call can come in between."""
+        self.start(self.refusal(goal_handle.request)[1])
+        self.goal = goal_handle
+        self.goal_ends[bytes(goal_handle.goal_id.uuid)] = Future()
+        goal_handle.execute()
+
+    async def execute_dock(self, goal_handle) -> Dock.Result:
+        """Wait for ``finish``; the goal SUCCEEDS when DOCKED, is CANCELED when canceled and
+        ABORTS otherwise (GAVE_UP, ABORTED: the result's outcome says which)."""
+        key = bytes(goal_handle.goal_id.uuid)
+        state, result = await self.goal_ends[key]
+        del self.goal_ends[key]
+        if state == DOCKED:
+            goal_handle.succeed()
+        elif goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return result
+
+    def on_cancel(self, goal_handle) -> CancelResponse:
+        """Cancel: the episode ends CANCELED at once (``finish``), so the executor stops the arm
+        on the status; a goal whose episode already ended cannot be canceled."""
+        if goal_handle is not self.goal or self.state != RUNNING:
+            return CancelResponse.REJECT
+        self.get_logger().info(f"episode {self.episode}: cancel requested by the dock client")
+        self.finish(CANCELED, "canceled by the dock action client")
+        return CancelResponse.ACCEPT
+
+    def start(self, settings: dict) -> None:
+        """Start an episode with ``settings`` (``goal_settings``)."""
         stamp_ms = (self.get_clock().now().nanoseconds // 1_000_000) % 2**32
         self.episode = stamp_ms if stamp_ms not in (0, self.episode) else self.episode + 1
         self.state, self.cycles, self.nonce = RUNNING, [], new_nonce()
+        self.configure(settings)
         self.episode_state = EpisodeState(tool=self.episode_state.tool)  # inference clears too
         self.awaiting_plan = None
         self.episode_start = self.get_clock().now()
         self.stage_start = now_seconds(self)
         start = {"event": "start", "episode": self.episode, "nonce": self.nonce}
-        self.log(start | {"start_ns": self.episode_start.nanoseconds}, reset=True)
+        start |= {"start_ns": self.episode_start.nanoseconds, "settings": settings}
+        self.log(start, reset=True)
         self.episode_pub.publish(UInt32(data=self.episode))
-        self.get_logger().info(f"episode {self.episode}: started")
+        self.get_logger().info(f"episode {self.episode}: started ({settings})")
         self.publish_status()
-        response.success, response.message = True, f"episode {self.episode} started"
-        return response
+
+    def configure(self, settings: dict) -> None:
+        """Plan with ``settings`` (``goal_settings``): ``self.settings``, ``self.config``."""
+        self.settings = settings
+        self.config = dataclasses.replace(
+            planner_config(self.p),
+            give_up_threshold=settings["give_up_threshold"],
+            compliant=settings["compliant"],
+        )
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
@@ -241,11 +363,11 @@ class PlannerNode(Node):
             f"decision=DOCK outcome={report.outcome_name} ({report.detail})"
         )
         if report.outcome == ExecutionReport.DOCKED:
-            self.finish(DOCKED, report.detail)
+            self.finish(DOCKED, report.detail, docked=report.stop_point)
         elif report.outcome == ExecutionReport.ABORTED and not report.producer_lost:
             self.finish(ABORTED, report.detail)
-        elif len(self.cycles) >= self.p.max_cycles:
-            self.finish(GAVE_UP, f"cycle budget of {self.p.max_cycles} spent")
+        elif len(self.cycles) >= self.settings["max_cycles"]:
+            self.finish(GAVE_UP, f"cycle budget of {self.settings['max_cycles']} spent")
         else:
             self.stage_start = now_seconds(self)
             self.publish_status()
@@ -359,7 +481,7 @@ class PlannerNode(Node):
     def add_cycle(self, event: dict) -> None:
         """Record a published plan (``event``: its journal record)."""
         keys = ("p_dock", "inference_s", "planning_s", "plan_stamp", "history_length")
-        cycle = {key: event[key] for key in keys} | {"outcome": ""}
+        cycle = {key: event[key] for key in keys} | {"outcome": "", "target": event["target"]}
         cycle["next_history"] = event["history_length"] + 1  # the next plan needs its evidence
         self.cycles.append(cycle)
         if event["dock"]:
@@ -373,6 +495,7 @@ class PlannerNode(Node):
         cycle = self.cycles[-1]
         cycle["outcome"] = "INTERRUPTED" if interrupted else event["outcome"]
         cycle["execution_s"] = event["execution_s"]
+        cycle["segments"] = event["segments"]
         if interrupted:  # plan again on the same history plus what the attempt felt
             cycle["next_history"] = cycle["history_length"] + event["segments"]
         self.awaiting_plan = None
@@ -424,6 +547,8 @@ class PlannerNode(Node):
         if kind == "start":
             self.episode, self.state, self.cycles = event["episode"], RUNNING, []
             self.nonce = int(event.get("nonce", 0))  # 0: a journal written before nonces
+            # no settings: a journal written before dock goals
+            self.configure(event.get("settings") or goal_settings(Dock.Goal(), self.p))
             self.episode_state = EpisodeState(tool=self.episode_state.tool)
             clock_type = self.get_clock().clock_type
             self.episode_start = Time(nanoseconds=event["start_ns"], clock_type=clock_type)
@@ -440,15 +565,32 @@ class PlannerNode(Node):
         state = self.episode_state.sampled(dropped=dropped)
         return plan_docking(vertices, self.prior, state, self.config)
 
+    def destroy_node(self) -> None:
+        """rclpy's ``destroy_node`` leaves action servers alive (they are waitables). Also
+        called by the context on a node whose constructor failed: no attribute is relied on."""
+        for server in [w for w in self.waitables if isinstance(w, ActionServer)]:
+            server.destroy()
+        super().destroy_node()
+
     # ------------------------------------------------------------------ episode status
 
-    def finish(self, state: str, why: str) -> None:
+    def finish(self, state: str, why: str, docked=None) -> None:
+        """End the episode in ``state``; ``docked``: the plane point of a DOCKED report."""
         self.state = state
         self.log({"event": "finish", "state": state, "why": why})
         self.get_logger().info(f"episode {self.episode}: {state} after {len(self.cycles)} cycles")
         self.publish_status(why)
+        if self.goal is not None:
+            load = None if docked is None else self.config.load
+            result = convert.dock_result(state, self.episode, len(self.cycles), why, docked, load)
+            self.goal_ends[bytes(self.goal.goal_id.uuid)].set_result((state, result))
+            self.goal = None
 
     def publish_status(self, detail: str = "") -> None:
+        """Publish ``episode_status``, and the feedback of a dock goal's cycle (each change of
+        a cycle: its plan, its report, the end)."""
+        if self.goal is not None and self.cycles:
+            self.goal.publish_feedback(convert.dock_feedback(self.state, self.cycles))
         prior_vertices = 0 if self.prior is None else self.prior.n_vertices
         self.status_pub.publish(
             convert.episode_status_to_msg(

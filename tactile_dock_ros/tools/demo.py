@@ -4,8 +4,9 @@
         [--bag DIR [--storage mcap|sqlite3]]
 
 Starts the five nodes of ``launch/tactile_dock.launch.xml profile:=mock`` as processes (what
-``ros2 launch`` would start), triggers ``/start_episode``, prints one line per cycle, the result
-and the latency breakdown, writes the episode figure, and exits 0 only when the tool DOCKED.
+``ros2 launch`` would start), sends an empty goal to ``/dock``, prints one line per cycle, the
+result and the latency breakdown, writes the episode figure, and exits 0 only when the tool
+DOCKED.
 Node logs go to ``--log-dir``; ``--bag DIR`` also records the episode's topics as a rosbag2 bag
 for ``python -m tactile_dock_ros.tools.replay DIR`` (MCAP by default, with the QoS each topic's
 publishers offered, so ``ros2 bag play DIR`` replays the latched topics latched).

@@ -3,9 +3,10 @@
 Each node of ``launch/tactile_dock.launch.xml`` (mock profile, launch defaults, no state
 journals) is instantiated in-process in its own rclpy context; its subscriptions, publications
 and services are read from the node itself (topic as resolved under the launch remappings, type,
-QoS), its parameters from the node's declared parameters and the module's ``PARAMS`` table (type,
-default, range, unit, description). rclpy's own parameter and type-description services and
-``/parameter_events`` are left out.
+QoS), its action servers from the ROS graph (rclpy keeps no action name; the node's own entities
+are in its graph at once), its parameters from the node's declared parameters and the module's
+``PARAMS`` table (type, default, range, unit, description). rclpy's own parameter and
+type-description services and ``/parameter_events`` are left out.
 
     python -m tactile_dock_ros.tools.describe                      # print the section
     python -m tactile_dock_ros.tools.describe --output docs/nodes.md
@@ -101,7 +102,10 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def describe_node(node, spec) -> dict:
-    """Topics, services and parameters that ``node`` (of launch entry ``spec``) created."""
+    """Topics, services, action servers and parameters that ``node`` (of launch entry ``spec``)
+    created."""
+    from rclpy.action import get_action_server_names_and_types_by_node
+
     module = importlib.import_module(type(node).__module__)
     table = {p.name: p for p in getattr(module, "PARAMS", [])}
     remapped = {target: source for source, target in spec.remappings}
@@ -123,6 +127,8 @@ def describe_node(node, spec) -> dict:
         if not s.srv_type.__module__.startswith(RCLPY_INTERFACES)
     )
     services = [[f"`{name}`", f"`{kind}`"] for name, kind in services]
+    servers = get_action_server_names_and_types_by_node(node, node.get_name(), node.get_namespace())
+    actions = [[f"`{name}`", f"`{kind}`"] for name, kinds in sorted(servers) for kind in kinds]
     parameters = []
     declared = [n for n in node._parameters if n not in RCLPY_PARAMETERS]
     order = [n for n in table if n in declared] + sorted(n for n in declared if n not in table)
@@ -141,6 +147,7 @@ def describe_node(node, spec) -> dict:
         "subscriptions": endpoints(node.subscriptions),
         "publications": endpoints(node.publishers),
         "services": services,
+        "actions": actions,
         "parameters": parameters,
     }
 
@@ -199,6 +206,8 @@ def render(nodes: list[tuple]) -> str:
                 lines += [*_table(["topic", "type", *qos_header], info[key]), ""]
         if info["services"]:
             lines += ["Services:", "", *_table(["service", "type"], info["services"]), ""]
+        if info["actions"]:
+            lines += ["Action servers:", "", *_table(["action", "type"], info["actions"]), ""]
         lines += ["Parameters:", ""]
         lines += _table(
             ["name", "type", "default", "range", "unit", "description"], info["parameters"]

@@ -2,8 +2,9 @@
 
 :class:`EpisodeClient` is an rclpy node that listens to everything an episode produces (prior,
 samples, history, plans, reports, the planner's ``episode_status``, the commands to the arm and
-the mock ground truth), calls ``start_episode`` and waits, bounded, for the end. The record
-gives the per-cycle progress lines, the latency breakdown and the episode figure.
+the mock ground truth), sends a goal to the planner's ``dock`` action and waits, bounded, for its
+result. The record gives the action's feedback and result, the per-cycle progress lines, the
+latency breakdown and the episode figure.
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TwistStamped
+from rclpy.action import ActionClient
 from rclpy.node import Node
-from std_srvs.srv import Trigger
 
+from tactile_dock_ros.action import Dock
 from tactile_dock_ros.msg import (
     ContactHistory,
     DockingPlan,
@@ -29,7 +31,7 @@ from tactile_dock_ros.msg import (
 from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.tools import bag, figures
 
-FINAL_STATES = ("DOCKED", "GAVE_UP", "ABORTED")
+FINAL_STATES = ("DOCKED", "GAVE_UP", "ABORTED", "CANCELED")
 
 
 @dataclass
@@ -44,6 +46,9 @@ class EpisodeRecord:
     plans: list = field(default_factory=list)
     reports: list = field(default_factory=list)
     status: EpisodeStatus | None = None
+    feedback: list = field(default_factory=list)  # Dock.Feedback, as received
+    result: Dock.Result | None = None
+    goal_status: int | None = None  # the goal's final action_msgs/GoalStatus, with the result
     command_speeds: list = field(default_factory=list)  # m/s of every command to the arm
     wall_seconds: float = 0.0
     messages: list = field(default_factory=list)  # (topic, receive ns, msg) for tools.bag.write
@@ -51,7 +56,10 @@ class EpisodeRecord:
 
     @property
     def state(self) -> str:
-        """The planner's latest state (``convert.EPISODE_STATES``), NONE before any status."""
+        """The goal's outcome once its result came, else the planner's latest state
+        (``convert.EPISODE_STATES``); NONE before either."""
+        if self.result is not None:
+            return convert.EPISODE_STATES[self.result.outcome]
         return convert.episode_status_from_msg(self.status)[0] if self.status else "NONE"
 
     @property
@@ -81,13 +89,15 @@ class EpisodeRecord:
 
 
 class EpisodeClient(Node):
-    """Listens to the suite; :meth:`run` starts one episode and waits for its end."""
+    """Listens to the suite; :meth:`run` sends one dock goal and waits for its result."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__("episode_client", **kwargs)
         self.record = EpisodeRecord()
         self.printed = 0
-        self.start_client = self.create_client(Trigger, "start_episode")
+        self.dock_client = ActionClient(self, Dock, "/dock")
+        self.goal = None  # the accepted goal's ClientGoalHandle
+        self.result = None  # its result Future
         keep = {
             attribute: lambda m, a=attribute: setattr(self.record, a, m)
             for attribute in ("prior", "truth", "history", "status")
@@ -142,25 +152,66 @@ class EpisodeClient(Node):
             executor.spin_once(timeout_sec=0.05)
         return bool(done())
 
-    def run(self, executor, timeout_s: float, progress=print) -> EpisodeRecord:
-        """Wait for the suite (prior, service, plan/report matches), start, wait for the end."""
-        t0 = self.start(executor, timeout_s)
-        self.spin_until(executor, lambda: self._progress(progress) in FINAL_STATES, timeout_s)
+    def destroy_node(self) -> None:
+        """rclpy's ``destroy_node`` leaves action clients alive (they are waitables)."""
+        self.dock_client.destroy()
+        super().destroy_node()
+
+    def run(
+        self, executor, timeout_s: float, progress=print, goal: Dock.Goal | None = None
+    ) -> EpisodeRecord:
+        """Wait for the suite (prior, action server, plan/report matches), send ``goal`` (None:
+        the empty goal, the planner's parameters), wait for its result."""
+        t0 = self.start(executor, timeout_s, goal)
+        self.wait_result(executor, timeout_s, progress)
         self.record.wall_seconds = time.monotonic() - t0
-        # Topics are not ordered with each other: let in-flight reports arrive (bounded).
+        # Topics are not ordered with each other: let in-flight reports, the final status and
+        # the last feedback (sent at the end of an episode that planned) arrive (bounded).
         docking = sum(p.decision == DockingPlan.DOCK for p in self.record.plans)
-        self.spin_until(executor, lambda: len(self.record.reports) >= docking, 5.0)
+        feedback = self.record.feedback
+        self.spin_until(
+            executor,
+            lambda: (
+                len(self.record.reports) >= docking
+                and self.status_state() == self.record.state
+                and (
+                    not self.record.plans
+                    or (feedback and feedback[-1].state != EpisodeStatus.RUNNING)
+                )
+            ),
+            5.0,
+        )
+        self._progress(progress)
         return self.record
 
-    def start(self, executor, timeout_s: float) -> float:
-        """Wait for the suite, then start an episode; the time.monotonic() of the start."""
+    def status_state(self) -> str:
+        """The planner's latest state on ``episode_status`` (NONE before any)."""
+        status = self.record.status
+        return convert.episode_status_from_msg(status)[0] if status else "NONE"
+
+    def wait_result(self, executor, timeout_s: float, progress=print) -> bool:
+        """Spin until the goal's result came (then in ``record.result``), printing a line per
+        finished cycle; whether it came within ``timeout_s``."""
+
+        def ended() -> bool:
+            self._progress(progress)
+            return self.result.done()
+
+        if self.spin_until(executor, ended, timeout_s):
+            response = self.result.result()
+            self.record.result, self.record.goal_status = response.result, response.status
+        return self.record.result is not None
+
+    def start(self, executor, timeout_s: float, goal: Dock.Goal | None = None) -> float:
+        """Wait for the suite, then send ``goal`` (None: the empty goal); the time.monotonic()
+        of the send. RuntimeError when the planner rejects it (its log says why)."""
         ready = self.spin_until(
             executor,
             lambda: (
                 self.record.prior is not None
                 and self.record.status is not None
                 and self.record.status.prior_vertices > 0  # the planner has it
-                and self.start_client.service_is_ready()
+                and self.dock_client.server_is_ready()
                 and self.count_publishers("plan") > 0
                 and self.count_publishers("execution_report") > 0
                 and self.count_publishers("shape_samples") > 0
@@ -168,19 +219,23 @@ class EpisodeClient(Node):
             timeout_s,
         )
         if not ready:
-            raise TimeoutError("the node suite did not come up (prior, start_episode, topics)")
+            raise TimeoutError("the node suite did not come up (prior, /dock, topics)")
         self.record.offered_qos = {  # as ros2 bag record stores them
             topic: [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             for topic in bag.EPISODE_TOPICS
         }
         t0 = time.monotonic()
-        future = self.start_client.call_async(Trigger.Request())
-        self.spin_until(executor, future.done, 10.0)
-        if not future.done() or not future.result().success:
-            raise RuntimeError(f"start_episode failed: {future.result() if future.done() else ''}")
+        sent = self.dock_client.send_goal_async(
+            goal or Dock.Goal(), feedback_callback=lambda m: self.record.feedback.append(m.feedback)
+        )
+        if not self.spin_until(executor, sent.done, 10.0):
+            raise TimeoutError("no answer from /dock to the goal within 10 s")
+        if not sent.result().accepted:
+            raise RuntimeError("the planner rejected the dock goal (its log says why)")
+        self.goal, self.result = sent.result(), sent.result().get_result_async()
         return t0
 
-    def _progress(self, progress) -> str:
+    def _progress(self, progress) -> None:
         cycles = [
             c
             for c in self.record.cycles()
@@ -189,7 +244,6 @@ class EpisodeClient(Node):
         for cycle in cycles[self.printed :]:
             progress(format_cycle(cycle))
         self.printed = max(self.printed, len(cycles))
-        return self.record.state
 
 
 def format_cycle(c: dict) -> str:
