@@ -92,7 +92,7 @@ $(STAMPS)/venv: $(REQUIREMENTS) | $(STAMPS)/python
 # The messages are built with the very same CMake project `colcon build` uses, installed into
 # the venv prefix. The hand-written Python package is NOT copied in for this developer build
 # (TACTILE_DOCK_INSTALL_PYTHON=OFF): it is imported from the work tree, so edits need no reinstall.
-$(STAMPS)/msgs: $(STAMPS)/venv CMakeLists.txt package.xml $(wildcard msg/*.msg action/*.action)
+$(STAMPS)/msgs: $(STAMPS)/venv CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv action/*.action)
 	@mkdir -p $(BUILD)
 	PATH="$(abspath $(VENV))/bin:$$PATH" cmake -S . -B $(BUILD) -Wno-dev \
 	  -DCMAKE_PREFIX_PATH="$(abspath $(VENV))" -DCMAKE_INSTALL_PREFIX="$(abspath $(VENV))" \

@@ -126,12 +126,13 @@ def test_each_suite_topic_has_one_publishing_enclave():
     assert set(shared) == {"/rosout", "/parameter_events"}
 
 
-def test_the_operator_may_only_call_the_dock_action_and_the_two_suite_services():
+def test_the_operator_may_only_call_the_dock_action_and_the_three_suite_services():
     by_path = profiles()
     operator = allowed(by_path[OPERATOR])
     assert operator["call"] == {"/dock"} and not operator["execute"]
     dock = {"/dock" + suffix for suffix in ACTION_SERVICES}
-    assert operator["request"] == {"/start_episode", "/perception/capture"} | dock
+    suite = {"/start_episode", "/perception/capture", "/evaluate_hold"}
+    assert operator["request"] == suite | dock
     assert operator["publish"] == {"/rosout", "/parameter_events"}
     assert operator["subscribe"] - SIM_TIME == {"/dock" + suffix for suffix in ACTION_TOPICS}
     others = [allowed(p) for k, p in by_path.items() if k != OPERATOR]

@@ -1,4 +1,5 @@
-"""perception: the terrain prior (ShapeDistribution on ``terrain_prior``, latched).
+"""perception: the terrain prior (ShapeDistribution on ``terrain_prior``, latched), the captured
+holds and their first-look evaluation (``/evaluate_hold``).
 
 ``prior_source: depth`` builds the prior from a depth Image + CameraInfo (``depth/image``,
 ``depth/camera_info``, sensor-data QoS) with the ROS-free ``perception`` package and the
@@ -8,29 +9,60 @@ occlusion), on the first valid frame (``capture: first_frame``) or on the next f
 cannot use is logged and skipped. ``prior_source: problem`` publishes the prior of a benchmark
 problem instead (fast and exact; the mock terrain is drawn from that same prior). RViz markers
 on ``~/markers``; ``~/status`` (DiagnosticStatus, latched) carries the compute time.
+
+Holds: every prior built (the first frame, each ``~/capture``, the problem's prior) is also kept
+as a hold (id from 1, capture stamp, prior) in a ``core.holds.HoldStore`` of ``max_holds``
+entries, the oldest dropped with a log; ``~/capture`` answers the id the capture gets ("hold N:
+..."). ``terrain_prior`` still carries the latest prior only. ``/evaluate_hold``
+(``EvaluateHold``) returns per requested hold what the planner's first cycle would plan on it
+(``core.holds.evaluate_hold``: ``evaluate_samples`` prior draws seeded with ``evaluate_seed``,
+``core.planner.plan`` with the planner's settings) from the latest ``tool_pose`` or a given
+position, without moving the arm; an unknown id is answered ``found: false`` with a reason.
+
+Decision: this node serves ``/evaluate_hold`` because it owns the holds; the planner's settings
+it needs are four read-only parameters declared here from the planner's own table
+(``planner_node.PARAMS``, mapped by ``planner_node.planner_config``, same defaults; both
+profiles leave them at those, test_holds checks the two configs agree). The planner would need
+every prior sent to it (a new topic or a service call per request) and would block its episode
+loop, whose plan resends are the executor's heartbeat, for ~10-100 ms per hold; this node is idle
+between captures.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PoseStamped
 from rclpy.node import Node
+from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.history import History
+from tactile_dock_ros.core.holds import HoldStore, evaluate_hold
 from tactile_dock_ros.core.shape import GaussianShape
-from tactile_dock_ros.msg import ShapeDistribution
-from tactile_dock_ros.nodes import convert, markers, qos
-from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, Stopwatch, header, run, subscribe
+from tactile_dock_ros.msg import HoldEvaluation, ShapeDistribution
+from tactile_dock_ros.nodes import convert, markers, planner_node, qos, validate
+from tactile_dock_ros.nodes.common import (
+    PLANE_TABLE,
+    Stopwatch,
+    header,
+    plane_frame,
+    run,
+    subscribe,
+)
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.terrain_prior import perceive
+from tactile_dock_ros.srv import EvaluateHold
 
+# the planner's settings of core.planner.plan, for /evaluate_hold (the module docstring)
+PLANNER_SETTINGS = ("load_direction", "give_up_threshold", "contact_resolution", "compliant")
 PARAMS = [
-    PLANE_FRAME_ID,  # the plane itself comes from perception_config (T_plane_camera)
+    *PLANE_TABLE,  # the prior's plane comes from perception_config; the tool pose's from these
     Param("prior_source", "depth", "where the prior comes from", choices=("depth", "problem")),
     Param(
         "problem",
@@ -51,6 +83,10 @@ PARAMS = [
         "",
         "frame of the depth image and camera info ('': any, the two must agree)",
     ),
+    Param("max_holds", 8, "captured holds kept (the oldest is dropped)", "", 1, 1000),
+    Param("evaluate_samples", 100, "prior draws per /evaluate_hold evaluation", "", 2, 100000),
+    Param("evaluate_seed", 0, "seed of each /evaluate_hold evaluation's draws", "", 0, 2**31 - 1),
+    *(p for p in planner_node.PARAMS if p.name in PLANNER_SETTINGS),
 ]
 
 
@@ -58,11 +94,18 @@ class PerceptionNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("perception", **kwargs)
         self.p = declare(self, PARAMS)
+        self.planner_config = planner_node.planner_config(self.p)
+        self.plane = plane_frame(self.p)
         self.rng = np.random.default_rng(self.p.seed)
+        self.holds = HoldStore(self.p.max_holds)
+        self.tool = None  # (2,) the latest tool position in the plane
         self.prior_pub = self.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", qos.LATCHED)
         self.create_service(Trigger, "~/capture", self.on_capture)
+        self.create_service(EvaluateHold, "evaluate_hold", self.on_evaluate)
+        base = self.p.base_frame_id
+        subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base)
         self.info = None
         self.pending = self.p.capture == "first_frame"
         if self.p.prior_source == "problem":
@@ -81,13 +124,80 @@ class PerceptionNode(Node):
         subscribe(self, Image, "depth/image", self.on_image, qos.SENSOR, camera)
 
     def on_capture(self, request, response):
+        hold = f"hold {self.holds.next_id}"  # the id the capture gets (captures go in turn)
         if self.p.prior_source == "problem":
             self.publish_prior(problems.get(self.p.problem).prior, "problem " + self.p.problem)
-            response.success, response.message = True, "prior republished"
+            response.success, response.message = True, f"{hold}: prior republished"
         else:
             self.pending = True
-            response.success, response.message = True, "the next valid depth frame is used"
+            response.success = True
+            response.message = f"{hold}: the next valid depth frame is used"
         return response
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        self.tool = convert.pose_position(msg, self.plane)
+
+    def on_evaluate(self, request, response):
+        """``EvaluateHold``: the first cycle's plan per requested hold; changes no state."""
+        ids = [int(i) for i in request.hold_ids] or self.holds.ids()
+        tool = self.tool
+        if request.use_tool_position:
+            p = request.tool_position
+            try:
+                tool = validate.within("tool_position", [p.x, p.y], validate.MAX_COORDINATE_M, "m")
+            except convert.MessageError as err:
+                response.success, response.message = False, str(err)
+                return response
+        elif tool is None:
+            response.success = False
+            response.message = "no tool position yet (tool_pose); set use_tool_position"
+            return response
+        response.holds = [self.evaluate(hold_id, tool) for hold_id in ids]
+        found = [h for h in response.holds if h.found]
+        response.success = True
+        response.message = f"{len(found)} of {len(ids)} holds evaluated from tool {tool.round(4)}"
+        self.get_logger().info(
+            response.message
+            + "".join(f"; hold {h.hold_id}: P_dock {h.path_docking_probability:.3f}" for h in found)
+        )
+        return response
+
+    def evaluate(self, hold_id: int, tool: np.ndarray) -> HoldEvaluation:
+        hold = self.holds.get(hold_id)
+        if hold is None:
+            kept = self.holds.ids()
+            return HoldEvaluation(
+                hold_id=hold_id, found=False, reason=f"no hold {hold_id} (kept: {kept})"
+            )
+        p = self.p
+        captured = Header(stamp=Time(nanoseconds=hold.stamp).to_msg(), frame_id=p.plane_frame_id)
+        try:
+            result = evaluate_hold(
+                hold.prior, tool, self.planner_config, p.evaluate_samples, p.evaluate_seed
+            )
+        except ValueError as err:  # a prior the planner cannot take: said, never raised
+            self.get_logger().error(f"hold {hold_id} not evaluated: {err}")
+            return HoldEvaluation(
+                hold_id=hold_id,
+                found=True,
+                header=captured,
+                decision=HoldEvaluation.GIVE_UP,
+                site=Point(x=np.nan, y=np.nan),
+                target_edge=-1,
+                reason=f"not evaluated: {err}",
+            )
+        return HoldEvaluation(
+            hold_id=hold_id,
+            found=True,
+            header=captured,
+            decision=HoldEvaluation.DOCK if result.decision == "dock" else HoldEvaluation.GIVE_UP,
+            site=Point(x=float(result.site[0]), y=float(result.site[1])),
+            target_edge=result.target_edge,
+            site_docking_probability=result.site_p_dock,
+            path_docking_probability=result.path_p_dock,
+            reason=result.reason,
+            compute_time=result.seconds,
+        )
 
     def on_info(self, msg: CameraInfo) -> None:
         convert.intrinsics_from_camera_info(msg)  # K alone; the image size is checked with it
@@ -111,7 +221,13 @@ class PerceptionNode(Node):
         self.publish_prior(result.prior, f"depth {msg.width}x{msg.height}", watch.seconds)
 
     def publish_prior(self, prior: GaussianShape, source: str, seconds: float = 0.0) -> None:
+        """Keep ``prior`` as a new hold and publish it (``terrain_prior``, markers, status)."""
         stamp = header(self, self.p.plane_frame_id)
+        hold, dropped = self.holds.add(Time.from_msg(stamp.stamp).nanoseconds, prior)
+        if dropped is not None:
+            self.get_logger().info(
+                f"hold {dropped.hold_id} dropped: {self.p.max_holds} holds are kept (max_holds)"
+            )
         self.prior_pub.publish(convert.shape_to_msg(prior, stamp))
         self.marker_pub.publish(
             markers.samples_and_history(prior.mean_vertices[None], History(), stamp)
@@ -123,12 +239,13 @@ class PerceptionNode(Node):
                 values=[
                     KeyValue(key="seconds", value=f"{seconds:.6f}"),
                     KeyValue(key="vertices", value=str(prior.n_vertices)),
+                    KeyValue(key="hold_id", value=str(hold.hold_id)),
                 ],
             )
         )
         self.get_logger().info(
-            f"prior from {source}: {prior.n_vertices} vertices, {prior.n_basis} basis columns, "
-            f"{seconds:.3f} s"
+            f"hold {hold.hold_id}, prior from {source}: {prior.n_vertices} vertices, "
+            f"{prior.n_basis} basis columns, {seconds:.3f} s"
         )
 
 
