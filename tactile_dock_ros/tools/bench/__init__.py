@@ -30,6 +30,7 @@ SUITES = {
     "docking": "Fig. 13: ours vs GW vs IG per problem, on the problem and the depth-camera prior",
     "episode": "mock-profile episodes over DDS per problem: outcomes (give-up vs budget), latency",
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
+    "holds": "evaluate_hold on held-out depth priors: latency, ROC AUC of P_dock (feasible truths)",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
     "posterior": "an episode's HMC posterior per cycle vs an SMC reference: means, P_dock, give-up",
     "prior": "depth prior calibration: 2-sigma coverage, NLL, energy score, old vs new model",
