@@ -31,6 +31,9 @@ def test_holds_bench_small(tmp_path):
         latency = pooled["latency"]
         assert latency["evaluations"] == len(times) and latency["max"] == max(times)
         assert 0 < latency["p50"] <= latency["p99"] <= latency["max"]
+        medians = [np.median(h["modes"][mode]["seconds"]) for h in evaluated]
+        assert latency["median_max"] == max(medians)
+        assert 0 < latency["median_p50"] <= latency["median_p99"] <= latency["median_max"]
 
 
 def test_roc_auc_counts_ordered_pairs_and_half_ties():
