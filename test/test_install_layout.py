@@ -67,6 +67,7 @@ def test_full_install_has_messages_python_package_and_share(tmp_path):
         "import tactile_dock_ros, tactile_dock_ros.core.problems as p\n"
         "from tactile_dock_ros.msg import ContactSegment, DockingPlan\n"
         "from tactile_dock_ros.action import Dock\n"
+        "from tactile_dock_ros.srv import EvaluateHold\n"
         "from ament_index_python.packages import get_package_share_directory as share\n"
         "print(p.__file__); print(share('tactile_dock_ros'))\n"
     )
