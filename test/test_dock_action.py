@@ -17,7 +17,7 @@ from tactile_dock_ros.nodes import convert, qos
 pytestmark = pytest.mark.dds
 
 OUT_OF_RANGE = [
-    Dock.Goal(hold_id=2),  # only the latest prior is kept
+    Dock.Goal(hold_id=2),  # no such hold received
     Dock.Goal(max_cycles=1001),
     Dock.Goal(give_up_threshold=1.5),
     Dock.Goal(give_up_threshold=-0.1),
@@ -64,7 +64,8 @@ def test_goals_are_checked_one_runs_at_a_time_and_cancel_ends_it_canceled(tmp_pa
             goal = Dock.Goal(max_cycles=3, give_up_threshold=0.01, compliant=Dock.Goal.COMPLIANT)
             handle = send(goal)
             assert handle.accepted and node.state == "RUNNING"
-            assert node.settings == {"max_cycles": 3, "give_up_threshold": 0.01, "compliant": True}
+            settings = {"max_cycles": 3, "give_up_threshold": 0.01, "compliant": True}
+            assert node.settings == settings | {"hold_id": 0}  # a prior that is no captured hold
             assert node.config.compliant and node.config.give_up_threshold == 0.01
             running = _state(node)
             assert not send(Dock.Goal()).accepted  # a second goal while one runs

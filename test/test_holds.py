@@ -26,6 +26,23 @@ def test_store_is_bounded_drops_the_oldest_and_numbers_holds_uniquely():
     assert store.ids() == [5, 6, 7] and store.get(4) is None and store.get(7).stamp == 1006
 
 
+def test_received_priors_keep_perceptions_ids_and_resolve_a_goals_hold():
+    received = holds.ReceivedPriors(2)
+    assert received.resolve(0) is None
+    for hold_id in (1, 2, 3):
+        notes = received.receive(
+            hold_id, hold_id, problems.get(problems.names()[hold_id - 1]).prior
+        )
+    assert notes == ["hold 1 dropped: 2 are kept"] and received.holds.ids() == [2, 3]
+    assert received.resolve(0).hold_id == 3 and received.resolve(1) is None
+    received.receive(3, 9, SLOPER.prior)  # the latched latest delivered again: replaced
+    assert received.holds.ids() == [2, 3] and received.resolve(3).stamp == 9
+    notes = received.receive(1, 10, SLOPER.prior)  # perception restarted its numbering
+    assert "restarted" in notes[0] and received.holds.ids() == [1]
+    received.receive(0, 11, SLOPER.prior)  # no captured hold: only the latest
+    assert received.resolve(0).hold_id == 0 and received.holds.ids() == [1]
+
+
 @pytest.mark.parametrize("capacity", [0, -1, 2.5, True])
 def test_store_capacity_must_be_a_positive_integer(capacity):
     with pytest.raises(ValueError, match="capacity"):

@@ -271,7 +271,9 @@ def test_planner_plans_with_the_slides_of_its_contact_history(tmp_path):
         history.publish(convert.history_to_msg(EpisodeState(slide, [4, 4]), convert.Header()))
         assert spin_until(executor, lambda: len(node.episode_state.history) == 2, 10.0)
         assert node.episode_state.move_ids.tolist() == [4, 4]
-        node.prior = GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), False, MU)
+        node.priors.receive(
+            0, 0, GaussianShape(slope.ravel(), 1e-3 * np.eye(slope.size), False, MU)
+        )
         node.episode_state = node.episode_state.move([0.05, 0.2])
         node.config = dataclasses.replace(node.config, load=LOAD)
         up = np.array([0.0, 1e-3])

@@ -10,6 +10,9 @@ inference node does with no contact yet, from a generator seeded per call, then 
 tool, settings and seed give the same answer.
 
 ``HoldStore`` keeps the captured holds (id, stamp, prior), bounded: the oldest is dropped.
+Perception numbers them; the planner and inference keep the priors they receive on
+``terrain_prior`` in a ``HoldStore`` of their own under perception's numbers (``add`` with
+``hold_id``), so that a dock goal names a hold the way ``/evaluate_hold`` does.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ from .shape import GaussianShape
 
 @dataclass(frozen=True)
 class Hold:
-    """One captured prior: ``hold_id`` (from 1, increasing), ``stamp`` (when it was captured,
+    """One captured prior: ``hold_id`` (from 1, increasing; 0: a prior that is no captured
+    hold, ``ReceivedPriors.latest``), ``stamp`` (when it was captured,
     integer nanoseconds of the caller's clock) and the ``prior``."""
 
     hold_id: int
@@ -46,14 +50,27 @@ class HoldStore:
         self._holds: OrderedDict[int, Hold] = OrderedDict()
         self._last_id = 0
 
-    def add(self, stamp: int, prior: GaussianShape) -> tuple[Hold, Hold | None]:
+    def add(
+        self, stamp: int, prior: GaussianShape, hold_id: int | None = None
+    ) -> tuple[Hold, Hold | None]:
         """Store ``prior`` as a new hold captured at ``stamp`` (ns); returns it and the hold
-        dropped to make room (or None). A bad argument raises ValueError and stores nothing."""
+        dropped to make room (or None). ``hold_id``: the id its source (perception) gave it,
+        default the next one. Decision: the last id again replaces that hold (a latched message
+        delivered again); an id below the last one means the source restarted its numbering, so
+        the kept holds (of the old numbering) are forgotten first. A bad argument raises
+        ValueError and stores nothing."""
         if not isinstance(prior, GaussianShape):
             raise ValueError(f"a hold's prior must be a GaussianShape, got {type(prior).__name__}")
         if isinstance(stamp, bool) or not isinstance(stamp, int | np.integer):
             raise ValueError(f"stamp must be integer nanoseconds, got {stamp!r}")
-        self._last_id += 1
+        if hold_id is None:
+            hold_id = self._last_id + 1
+        elif isinstance(hold_id, bool) or int(hold_id) != hold_id or hold_id < 1:
+            raise ValueError(f"hold_id must be an integer >= 1, got {hold_id!r}")
+        if hold_id < self._last_id:
+            self._holds.clear()
+        self._holds.pop(hold_id, None)
+        self._last_id = int(hold_id)
         hold = Hold(self._last_id, int(stamp), prior)
         dropped = self._holds.popitem(last=False)[1] if len(self._holds) >= self.capacity else None
         self._holds[hold.hold_id] = hold
@@ -73,6 +90,37 @@ class HoldStore:
 
     def __len__(self) -> int:
         return len(self._holds)
+
+
+class ReceivedPriors:
+    """The priors a node received on ``terrain_prior``: the latest one (``Hold`` with its
+    message's ``hold_id``, 0 when it is no captured hold) and the captured ones by id, the last
+    ``capacity`` (a ``HoldStore`` under perception's numbers)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.holds = HoldStore(capacity)
+        self.latest: Hold | None = None
+
+    def receive(self, hold_id: int, stamp: int, prior: GaussianShape) -> list[str]:
+        """Keep a received prior; returns what to log (holds forgotten or dropped)."""
+        notes = []
+        if hold_id:
+            last = self.holds.next_id - 1
+            if hold_id < last:
+                notes.append(f"hold {hold_id} after hold {last}: perception restarted, the earlier"
+                             " holds are forgotten")  # fmt: skip
+            hold, dropped = self.holds.add(stamp, prior, hold_id)
+            if dropped is not None:
+                notes.append(f"hold {dropped.hold_id} dropped: {self.holds.capacity} are kept")
+        else:
+            hold = Hold(0, int(stamp), prior)
+        self.latest = hold
+        return notes
+
+    def resolve(self, hold_id: int) -> Hold | None:
+        """The hold a dock goal (or episode) names: 0 the latest prior, else that kept hold;
+        None when there is none."""
+        return self.latest if hold_id == 0 else self.holds.get(hold_id)
 
 
 @dataclass(frozen=True)

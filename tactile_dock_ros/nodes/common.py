@@ -40,6 +40,9 @@ PLANE_TABLE = [
     Param("plane_y_axis", [0.0, 0.0, 1.0], "plane y axis (up) in the base frame", "unit", length=3),
 ]
 
+# Captured holds kept by perception, and their priors by the planner and inference (one bound).
+MAX_HOLDS = Param("max_holds", 8, "captured holds kept (the oldest is dropped)", "", 1, 1000)
+
 
 def plane_frame(values) -> PlaneFrame:
     return PlaneFrame(values.plane_origin, values.plane_x_axis, values.plane_y_axis)

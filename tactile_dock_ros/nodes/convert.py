@@ -139,9 +139,10 @@ def vector3(v) -> Vector3:
 # --------------------------------------------------------------------------- shapes
 
 
-def shape_to_msg(shape: GaussianShape, header: Header) -> ShapeDistribution:
+def shape_to_msg(shape: GaussianShape, header: Header, hold_id: int = 0) -> ShapeDistribution:
     return ShapeDistribution(
         header=header,
+        hold_id=int(hold_id),
         num_vertices=shape.n_vertices,
         mean=shape.mean.tolist(),
         num_basis=shape.n_basis,
@@ -222,9 +223,12 @@ def samples_to_msg(
     history_length: int,
     dropped=(),
     compute_time: float = 0.0,
+    hold_id: int = 0,
 ) -> ShapeSamples:
+    """``hold_id``: the hold whose prior the samples were drawn from (0: no captured hold)."""
     vertices = np.asarray(vertices, float)
     return ShapeSamples(
+        hold_id=int(hold_id),
         header=header,
         num_vertices=vertices.shape[1],
         num_samples=vertices.shape[0],
@@ -405,13 +409,15 @@ def episode_status_to_msg(
     prior_vertices: int,
     cycles,
     nonce: int = 0,
+    hold_id: int = 0,
 ) -> EpisodeStatus:
     """The planner's episode status; ``state`` one of EPISODE_STATES, ``cycles`` its records in
     order (dicts: p_dock, inference_s, planning_s and, once reported, execution_s and outcome),
-    ``nonce`` the episode's (0: none)."""
+    ``nonce`` the episode's (0: none), ``hold_id`` and ``prior_vertices`` its hold's."""
     return EpisodeStatus(
         header=header,
         episode=int(episode),
+        hold_id=int(hold_id),
         nonce=int(nonce),
         state=getattr(EpisodeStatus, state),
         detail=detail,
@@ -451,12 +457,15 @@ def dock_feedback(state: str, cycles) -> Dock.Feedback:
     )
 
 
-def dock_result(state: str, episode: int, cycles: int, reason: str, docked=None, load=None):
+def dock_result(
+    state: str, episode: int, hold_id: int, cycles: int, reason: str, docked=None, load=None
+):
     """The /dock action's result; ``docked``, ``load``: plane 2-vectors of a DOCKED episode (the
     report's stop point, the load direction), None otherwise (zero in the message)."""
     return Dock.Result(
         outcome=getattr(EpisodeStatus, state),
         episode=int(episode),
+        hold_id=int(hold_id),
         cycles=int(cycles),
         docked_point=_point((0.0, 0.0) if docked is None else docked),
         load=Vector3() if load is None else Vector3(x=float(load[0]), y=float(load[1]), z=0.0),

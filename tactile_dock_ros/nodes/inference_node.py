@@ -11,6 +11,12 @@ episode id came) and, after every change while an episode runs, samples the post
 ``core.sampling.sample_posterior`` and publishes ``shape_samples`` (latched) and RViz markers on
 ``~/markers``.
 
+Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.ReceivedPriors``, the
+last ``max_holds``, as the planner keeps them); the episode samples on the hold its
+``episode_status`` names (``EpisodeStatus.hold_id``; until that status came, the latest prior)
+and ``shape_samples`` carry that ``hold_id``: the planner plans only on samples of its episode's
+hold (the decision is in the planner's docstring).
+
 Restart without loss: with ``state_directory`` set, every report applied is journaled
 (``nodes.journal``, ``<state_directory>/inference.jsonl``) before the history is published, and a
 restarted node given the same episode id restores the history from it (docs/nodes.md). Each
@@ -36,12 +42,14 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.time import Time
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
 from tactile_dock_ros.core import descent_scan, hmc_exit
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
+from tactile_dock_ros.core.holds import ReceivedPriors
 from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
 from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.msg import (
@@ -52,7 +60,7 @@ from tactile_dock_ros.msg import (
     ShapeSamples,
 )
 from tactile_dock_ros.nodes import convert, journal, markers, qos, warm_start
-from tactile_dock_ros.nodes.common import PLANE_FRAME_ID, header, run, subscribe
+from tactile_dock_ros.nodes.common import MAX_HOLDS, PLANE_FRAME_ID, header, run, subscribe
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.nodes.watchdog import EpisodeGate
 
@@ -67,6 +75,7 @@ PARAMS = [
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param("marker_samples", 20, "samples drawn as RViz line strips", "", 0, 1000),
+    MAX_HOLDS,
     Param(
         "state_directory",
         "",
@@ -89,7 +98,10 @@ class InferenceNode(Node):
             " descent line scan; compiled or cached)"
         )
         self.rng = np.random.default_rng(self.p.seed)
-        self.prior = None
+        self.priors = ReceivedPriors(self.p.max_holds)
+        self.status_hold = (0, 0)  # (episode, hold_id) of the latest episode_status
+        self.prior = None  # the prior sampled on (``select_prior``) and its hold id
+        self.prior_hold = 0
         self.prior_fingerprint = ""  # ``warm_start.prior_fingerprint`` of ``prior``
         # the history with each row's plan, and the previous posterior (the warm start)
         self.episode_state = EpisodeState()
@@ -120,18 +132,39 @@ class InferenceNode(Node):
 
     def on_prior(self, msg: ShapeDistribution) -> None:
         prior = convert.shape_from_msg(msg)
-        fingerprint = warm_start.prior_fingerprint(prior)
+        stamp = Time.from_msg(msg.header.stamp).nanoseconds
         with self.lock:
-            same = self.prior_fingerprint == fingerprint
-            self.prior, self.prior_fingerprint = prior, fingerprint
-            if not same:  # z of another prior's basis: sample cold
-                self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
-            self.adopt_saved_warm_start()
+            notes = self.priors.receive(msg.hold_id, stamp, prior)
+            selected = self.select_prior()
+            sampled = msg.hold_id == self.prior_hold and self.prior is not None
+        for note in notes:
+            self.get_logger().info(note)
         self.get_logger().info(
-            f"prior: {prior.n_vertices} vertices, {prior.n_basis} basis columns"
-            + (" (the same again: warm start kept)" if same else "")
+            f"prior of hold {msg.hold_id}: {prior.n_vertices} vertices, {prior.n_basis} basis "
+            f"columns ({selected or ('the same again' if sampled else 'not the episode hold')})"
         )
-        self.changed()
+        if sampled:  # sampled again, as on any input of the episode's
+            self.changed()
+
+    def select_prior(self) -> str | None:
+        """Sample on the current episode's hold (the latest prior until its status came); under
+        the lock. Returns None when that changed nothing, else what changed (for the log)."""
+        episode, hold_id = self.status_hold
+        wanted = hold_id if episode == self.episode else 0
+        hold = self.priors.resolve(wanted)
+        prior = None if hold is None else hold.prior
+        fingerprint = "" if prior is None else warm_start.prior_fingerprint(prior)
+        hold_id = wanted if hold is None else hold.hold_id
+        if (hold_id, fingerprint) == (self.prior_hold, self.prior_fingerprint):
+            return None
+        same = fingerprint == self.prior_fingerprint
+        if not same:  # z of another prior's basis: sample cold
+            self.episode_state = dataclasses.replace(self.episode_state, warm_start=None)
+        self.prior, self.prior_hold, self.prior_fingerprint = prior, hold_id, fingerprint
+        self.adopt_saved_warm_start()
+        if prior is None:
+            return f"hold {hold_id} of episode {episode} not received: no samples"
+        return f"sampling on hold {hold_id}" + (": the same prior, warm start kept" if same else "")
 
     def on_episode(self, msg: UInt32) -> None:
         episode = convert.episode_from_msg(msg)
@@ -147,6 +180,9 @@ class InferenceNode(Node):
             self.handled_plans.clear()
             restored = self.restore()
             self.adopt_saved_warm_start()
+            selected = self.select_prior()
+        if selected is not None:
+            self.get_logger().info(selected)
         self.get_logger().info(
             f"episode {self.episode}: history restored from the journal, {restored} reports "
             f"({len(self.episode_state.history)} segments)"
@@ -210,6 +246,11 @@ class InferenceNode(Node):
         state, episode = convert.episode_status_from_msg(msg)
         with self.lock:
             self.gate.update(episode, state, int(msg.nonce))
+            self.status_hold = (episode, int(msg.hold_id))
+            selected = self.select_prior()
+        if selected is not None:
+            self.get_logger().info(selected)
+            self.changed()
 
     def on_report(self, msg: ExecutionReport) -> None:
         report = convert.report_from_msg(msg)
@@ -273,6 +314,7 @@ class InferenceNode(Node):
         callback); a result overtaken by a newer history is dropped (that one is sampled)."""
         with self.lock:
             generation, prior, state = self.generation, self.prior, self.episode_state
+            hold_id = self.prior_hold
             fingerprint = self.prior_fingerprint
             episode, cycle, frame_id = self.episode, len(self.handled_plans) + 1, self.frame_id
         if prior is None or episode == 0:
@@ -309,6 +351,7 @@ class InferenceNode(Node):
                     self.p.method,
                     0.0,
                     len(history),
+                    hold_id=hold_id,
                 )
             )
             return
@@ -322,6 +365,7 @@ class InferenceNode(Node):
                 len(history),
                 posterior.dropped,
                 posterior.seconds,
+                hold_id,
             )
         )
         self.marker_pub.publish(

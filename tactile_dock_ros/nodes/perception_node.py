@@ -13,7 +13,8 @@ on ``~/markers``; ``~/status`` (DiagnosticStatus, latched) carries the compute t
 Holds: every prior built (the first frame, each ``~/capture``, the problem's prior) is also kept
 as a hold (id from 1, capture stamp, prior) in a ``core.holds.HoldStore`` of ``max_holds``
 entries, the oldest dropped with a log; ``~/capture`` answers the id the capture gets ("hold N:
-..."). ``terrain_prior`` still carries the latest prior only. ``/evaluate_hold``
+..."). ``terrain_prior`` carries each new prior with its ``hold_id``: the planner and inference
+keep them by id too, so a ``/dock`` goal docks on the hold it names. ``/evaluate_hold``
 (``EvaluateHold``) returns per requested hold what the planner's first cycle would plan on it
 (``core.holds.evaluate_hold``: ``evaluate_samples`` prior draws seeded with ``evaluate_seed``,
 ``core.planner.plan`` with the planner's settings) from the latest ``tool_pose`` or a given
@@ -47,6 +48,7 @@ from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import HoldEvaluation, ShapeDistribution
 from tactile_dock_ros.nodes import convert, markers, planner_node, qos, validate
 from tactile_dock_ros.nodes.common import (
+    MAX_HOLDS,
     PLANE_TABLE,
     Stopwatch,
     header,
@@ -83,7 +85,7 @@ PARAMS = [
         "",
         "frame of the depth image and camera info ('': any, the two must agree)",
     ),
-    Param("max_holds", 8, "captured holds kept (the oldest is dropped)", "", 1, 1000),
+    MAX_HOLDS,
     Param("evaluate_samples", 100, "prior draws per /evaluate_hold evaluation", "", 2, 100000),
     Param("evaluate_seed", 0, "seed of each /evaluate_hold evaluation's draws", "", 0, 2**31 - 1),
     *(p for p in planner_node.PARAMS if p.name in PLANNER_SETTINGS),
@@ -228,7 +230,7 @@ class PerceptionNode(Node):
             self.get_logger().info(
                 f"hold {dropped.hold_id} dropped: {self.p.max_holds} holds are kept (max_holds)"
             )
-        self.prior_pub.publish(convert.shape_to_msg(prior, stamp))
+        self.prior_pub.publish(convert.shape_to_msg(prior, stamp, hold.hold_id))
         self.marker_pub.publish(
             markers.samples_and_history(prior.mean_vertices[None], History(), stamp)
         )

@@ -1,7 +1,8 @@
 """planner: docking plans from posterior samples (paper Sec. V-B), and the episode loop.
 
-An episode starts with a goal of the ``dock`` action (``Dock.action``: overrides of max_cycles,
-give_up_threshold and compliant for this episode; feedback at each plan and report; the result),
+An episode starts with a goal of the ``dock`` action (``Dock.action``: the hold to dock on,
+overrides of max_cycles, give_up_threshold and compliant for this episode; feedback at each plan
+and report; the result),
 or with the ``start_episode`` service (std_srvs/Trigger), a thin wrapper kept for simple scripts
 that starts the same episode as an empty goal. Both are refused while an episode runs or before a
 ``terrain_prior`` arrived, a goal also when a field is out of range (the reason is logged; a
@@ -23,13 +24,26 @@ without docking), ABORTED (the executor aborted) or CANCELED. ``episode_status``
 latched) carries the state, the prior's vertex count (0: none yet) and each cycle's P_dock,
 latencies and outcome.
 
+Holds: the node keeps each ``terrain_prior`` it receives by its ``hold_id`` (perception's capture
+id; ``core.holds.ReceivedPriors``, the last ``max_holds`` as perception keeps them) and the
+latest; a goal's ``hold_id`` (0: the latest) picks the episode's prior, pinned for the episode (a
+capture meanwhile does not change it), an id not kept is rejected. Decision: inference keeps the
+priors by id the same way and samples on the hold that ``episode_status`` names (``hold_id``),
+its samples say which hold they were drawn from (``ShapeSamples.hold_id``) and the planner plans
+only on samples of its episode's hold, so the two cannot plan and sample on different priors.
+Asking perception to republish the chosen hold instead would add a service call and a wait state
+to goal handling and still leave inference racing the new prior against the episode start. A
+node started after a capture has received only the latest prior (``terrain_prior`` is latched
+with depth 1): it cannot dock on, or resume an episode on, an earlier hold.
+
 Restart without loss: with ``state_directory`` set, the episode's events (start with the goal's
-settings, each plan with its serialized message, each report's outcome, the end) go to a journal
-(``nodes.journal``, ``<state_directory>/planner.jsonl``, replaced at each start). A restarted
-planner replays it: the same episode id (republished, so inference keeps its history), settings,
-cycles, aim points (eq. 24) and the plan being executed, which it resends again (the action goal
-does not survive a restart: its client watches ``episode_status``); a RUNNING episode whose last
-event is older than ``resume_timeout`` (wall clock) is not resumed but ends ABORTED. An attempt
+settings and hold, each plan with its serialized message, each report's outcome, the end) go to a
+journal (``nodes.journal``, ``<state_directory>/planner.jsonl``, replaced at each start). A
+restarted planner replays it: the same episode id (republished, so inference keeps its history),
+settings, hold, cycles, aim points (eq. 24) and the plan being executed, which it resends again
+(the action goal does not survive a restart: its client watches ``episode_status``); a RUNNING
+episode whose last event is older than ``resume_timeout`` (wall clock) is not resumed but ends
+ABORTED. An attempt
 the executor stopped because this node fell silent (``Report.producer_lost``) ends its cycle
 without ending the episode: the next plan is made once inference has the attempt's evidence.
 """
@@ -53,6 +67,7 @@ from std_srvs.srv import Trigger
 
 from tactile_dock_ros.action import Dock
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
+from tactile_dock_ros.core.holds import ReceivedPriors
 from tactile_dock_ros.core.planner import plan as plan_docking
 from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.msg import (
@@ -65,6 +80,7 @@ from tactile_dock_ros.msg import (
 )
 from tactile_dock_ros.nodes import convert, journal, qos, validate
 from tactile_dock_ros.nodes.common import (
+    MAX_HOLDS,
     PLANE_TABLE,
     Stopwatch,
     header,
@@ -86,6 +102,7 @@ PARAMS = [
     Param("compliant", False, "plan with the compliant motion model"),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
     Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
+    MAX_HOLDS,
     Param("state_directory", "", "directory of the crash-safe episode journal; empty: none"),
     Param(
         "resume_timeout",
@@ -118,14 +135,11 @@ def planner_config(p) -> PlannerConfig:
 def goal_settings(goal: Dock.Goal, p) -> dict:
     """The episode settings (``GOAL_OVERRIDES`` names -> values) of a dock goal: its nonzero
     fields, checked against the ranges of the parameters they override (``PARAMS``), else the
-    parameters ``p``. ValueError with the reason for a goal the planner must reject.
+    parameters ``p`` (the node checks ``hold_id``: it keeps the holds). ValueError with the
+    reason for a goal the planner must reject.
     Decision: 0 selects the parameter, so the empty goal runs the node's episode; NaN is
     refused like any non-finite value (a give_up_threshold of 0, never giving up, is only
     available as the parameter)."""
-    if goal.hold_id != 0:
-        raise ValueError(
-            f"hold_id {goal.hold_id}: the planner keeps only the latest terrain_prior (hold_id 0)"
-        )
     settings = {name: getattr(p, name) for name in GOAL_OVERRIDES}
     table = {param.name: param for param in PARAMS}
     for name in ("max_cycles", "give_up_threshold"):
@@ -161,7 +175,8 @@ class PlannerNode(Node):
         self.p = declare(self, PARAMS)
         self.configure(goal_settings(Dock.Goal(), self.p))
         self.plane = plane_frame(self.p)
-        self.prior = None
+        self.priors = ReceivedPriors(self.p.max_holds)
+        self.hold_id = 0  # the running (or last) episode's hold: ``prior``
         # history with each row's plan (from contact_history), tool (tool_pose), aim points
         self.episode_state = EpisodeState()
         self.samples = None  # (msg, vertices) of the newest samples
@@ -205,9 +220,19 @@ class PlannerNode(Node):
 
     # ------------------------------------------------------------------ inputs
 
+    @property
+    def prior(self):
+        """The prior planning uses: the running episode's hold's, else the latest (what a ``{}``
+        goal docks on); None when it has not been received."""
+        hold = self.priors.resolve(self.hold_id if self.state == RUNNING else 0)
+        return None if hold is None else hold.prior
+
     def on_prior(self, msg: ShapeDistribution) -> None:
-        first = self.prior is None
-        self.prior = convert.shape_from_msg(msg)
+        prior = convert.shape_from_msg(msg)
+        first = self.priors.latest is None
+        stamp = Time.from_msg(msg.header.stamp).nanoseconds
+        for note in self.priors.receive(msg.hold_id, stamp, prior):
+            self.get_logger().info(note)
         for slot in ("samples", "samples_ahead"):  # kept unchecked until a prior came
             held = getattr(self, slot)
             try:
@@ -216,8 +241,8 @@ class PlannerNode(Node):
             except convert.MessageError as err:
                 setattr(self, slot, None)
                 self.get_logger().warning(f"samples dropped: {err}")
-        if first:
-            self.publish_status()  # tells clients that start_episode will be accepted
+        if self.state != RUNNING or first:
+            self.publish_status()  # the latest hold (a goal of {} docks on it), or the first
 
     def on_pose(self, msg: PoseStamped) -> None:
         self.episode_state = self.episode_state.move(convert.pose_position(msg, self.plane))
@@ -235,6 +260,8 @@ class PlannerNode(Node):
         conditioned on more rows than the known history wait aside until that history arrives
         (the two latched topics may arrive in either order, e.g. at a restart): they replace
         neither the current samples nor are dropped."""
+        if msg.hold_id != self.hold_id and self.state == RUNNING:
+            return  # drawn from another hold's prior: inference has not switched yet
         empty = msg.num_samples == 0 and len(msg.samples) == 0  # inference found no shape
         samples = (msg, None if empty else convert.samples_from_msg(msg))
         self.check_samples(*samples)
@@ -256,14 +283,19 @@ class PlannerNode(Node):
     # ------------------------------------------------------------------ starting an episode
 
     def refusal(self, goal: Dock.Goal) -> tuple[str, dict | None]:
-        """('' and the episode settings) when ``goal`` may start an episode now, else (why,
-        None). Changes nothing."""
+        """('' and the episode settings, with its ``hold_id``: the goal's, 0 resolved to the
+        latest prior's) when ``goal`` may start an episode now, else (why, None). Changes
+        nothing."""
         if self.state == RUNNING:
             return f"episode {self.episode} is running", None
-        if self.prior is None:
+        if self.priors.latest is None:
             return "no terrain_prior yet (robot profile: call /perception/capture)", None
+        hold = self.priors.resolve(goal.hold_id)
+        if hold is None:
+            kept = self.priors.holds.ids()
+            return f"hold_id {goal.hold_id}: no such hold received (kept: {kept})", None
         try:
-            return "", goal_settings(goal, self.p)
+            return "", goal_settings(goal, self.p) | {"hold_id": hold.hold_id}
         except ValueError as err:
             return str(err), None
 
@@ -321,6 +353,7 @@ class PlannerNode(Node):
         stamp_ms = (self.get_clock().now().nanoseconds // 1_000_000) % 2**32
         self.episode = stamp_ms if stamp_ms not in (0, self.episode) else self.episode + 1
         self.state, self.cycles, self.nonce = RUNNING, [], new_nonce()
+        self.hold_id = settings["hold_id"]
         self.configure(settings)
         self.episode_state = EpisodeState(tool=self.episode_state.tool)  # inference clears too
         self.awaiting_plan = None
@@ -330,11 +363,13 @@ class PlannerNode(Node):
         start |= {"start_ns": self.episode_start.nanoseconds, "settings": settings}
         self.log(start, reset=True)
         self.episode_pub.publish(UInt32(data=self.episode))
-        self.get_logger().info(f"episode {self.episode}: started ({settings})")
+        self.get_logger().info(
+            f"episode {self.episode}: started on hold {self.hold_id} ({settings})"
+        )
         self.publish_status()
 
     def configure(self, settings: dict) -> None:
-        """Plan with ``settings`` (``goal_settings``): ``self.settings``, ``self.config``."""
+        """Plan with ``settings`` (``refusal``'s): ``self.settings``, ``self.config``."""
         self.settings = settings
         self.config = dataclasses.replace(
             planner_config(self.p),
@@ -400,6 +435,7 @@ class PlannerNode(Node):
         fresh = Time.from_msg(msg.header.stamp) >= self.episode_start
         return (
             fresh
+            and msg.hold_id == self.hold_id
             and self.prior is not None
             and self.episode_state.tool is not None
             and msg.history_length == len(self.episode_state.history)
@@ -547,8 +583,12 @@ class PlannerNode(Node):
         if kind == "start":
             self.episode, self.state, self.cycles = event["episode"], RUNNING, []
             self.nonce = int(event.get("nonce", 0))  # 0: a journal written before nonces
-            # no settings: a journal written before dock goals
-            self.configure(event.get("settings") or goal_settings(Dock.Goal(), self.p))
+            # no settings: a journal written before dock goals; no hold: before hold ids
+            settings = {"hold_id": 0} | (
+                event.get("settings") or goal_settings(Dock.Goal(), self.p)
+            )
+            self.hold_id = settings["hold_id"]
+            self.configure(settings)
             self.episode_state = EpisodeState(tool=self.episode_state.tool)
             clock_type = self.get_clock().clock_type
             self.episode_start = Time(nanoseconds=event["start_ns"], clock_type=clock_type)
@@ -582,7 +622,9 @@ class PlannerNode(Node):
         self.publish_status(why)
         if self.goal is not None:
             load = None if docked is None else self.config.load
-            result = convert.dock_result(state, self.episode, len(self.cycles), why, docked, load)
+            result = convert.dock_result(
+                state, self.episode, self.hold_id, len(self.cycles), why, docked, load
+            )
             self.goal_ends[bytes(self.goal.goal_id.uuid)].set_result((state, result))
             self.goal = None
 
@@ -591,16 +633,18 @@ class PlannerNode(Node):
         a cycle: its plan, its report, the end)."""
         if self.goal is not None and self.cycles:
             self.goal.publish_feedback(convert.dock_feedback(self.state, self.cycles))
-        prior_vertices = 0 if self.prior is None else self.prior.n_vertices
+        prior = self.prior
+        hold = self.hold_id if self.state == RUNNING else getattr(self.priors.latest, "hold_id", 0)
         self.status_pub.publish(
             convert.episode_status_to_msg(
                 header(self, ""),
                 self.state,
                 self.episode,
                 detail,
-                prior_vertices,
+                0 if prior is None else prior.n_vertices,
                 self.cycles,
                 self.nonce,
+                hold,
             )
         )
 

@@ -106,14 +106,16 @@ def _episode_spans(plans: list) -> dict[int, tuple[int, int]]:
 def load_cycles(path: Path, log=print) -> list[Cycle]:
     """The cycles of every episode in the bag at ``path``, in order.
 
-    A plan's inputs are the prior and the ``/contact_history`` and ``/shape_samples`` of the
-    length the plan records (``DockingPlan.history_length``), recorded within its episode and
-    each stamped last at or before the plan (``_pick``). Raises ``bag.BagError`` when the bag
-    cannot be read or holds no plan with its inputs.
+    A plan's inputs are the ``/contact_history`` and ``/shape_samples`` of the length the plan
+    records (``DockingPlan.history_length``), recorded within its episode and each stamped last
+    at or before the plan (``_pick``), and the prior of the hold the samples name
+    (``ShapeSamples.hold_id``), stamped last at or before the plan; a captured hold's since the
+    bag's start (it may predate earlier episodes), hold 0 (no captured hold) within the episode.
+    Raises ``bag.BagError`` when the bag cannot be read or holds no plan with its inputs.
     """
     from ..nodes import convert
 
-    priors: list = []
+    priors: dict[int, list] = {}  # hold id -> [(position, stamp, GaussianShape)]
     histories: dict[int, list] = {}  # length -> [(position, stamp, EpisodeState)]
     samples: dict[int, list] = {}  # history length -> [(position, stamp, (vertices, dropped))]
     reports: dict[tuple[int, int], str] = {}  # (episode, plan_id) -> outcome name
@@ -121,12 +123,13 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
     for position, (topic, _, msg) in enumerate(bag.read(path)):
         entry = (position, _stamp_ns(msg)) if hasattr(msg, "header") else (position, 0)
         if topic == "/terrain_prior":
-            priors.append((*entry, convert.shape_from_msg(msg)))
+            priors.setdefault(int(msg.hold_id), []).append((*entry, convert.shape_from_msg(msg)))
         elif topic == "/contact_history":
             state = convert.history_from_msg(msg)
             histories.setdefault(len(state.history), []).append((*entry, state))
         elif topic == "/shape_samples" and msg.num_samples > 0:
-            value = (convert.samples_from_msg(msg), np.array(msg.dropped_segments, int))
+            dropped = np.array(msg.dropped_segments, int)
+            value = (convert.samples_from_msg(msg), dropped, int(msg.hold_id))
             samples.setdefault(int(msg.history_length), []).append((*entry, value))
         elif topic == "/execution_report":
             report = convert.report_from_msg(msg)
@@ -148,9 +151,13 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
         length = command.history_length
         picked = [
             _pick(items, spans[episode], stamp)
-            for items in (priors, histories.get(length, []), samples.get(length, []))
+            for items in (histories.get(length, []), samples.get(length, []))
         ]
-        (prior, _), (recorded, _), (drawn, _) = picked
+        (recorded, _), (drawn, _) = picked
+        hold = 0 if drawn is None else drawn[2]
+        span = spans[episode] if hold == 0 else (0, spans[episode][1])
+        picked.append(_pick(priors.get(hold, []), span, stamp))
+        prior = picked[-1][0]
         if prior is None or recorded is None or drawn is None:
             log(f"{name}: skipped, its prior, history or samples (length {length}) are missing")
             continue
@@ -160,7 +167,7 @@ def load_cycles(path: Path, log=print) -> list[Cycle]:
             log(f"{name}: skipped, no tool position")
             continue
         outcome = reports.get((episode, command.plan_id), "-")
-        vertices, dropped = drawn
+        vertices, dropped, _ = drawn
         state = replace(recorded, dropped=dropped, targets=previous, tool=command.waypoints[0])
         cycles.append(Cycle(episode, prior, state, vertices, command, outcome))
     if not cycles:
