@@ -7,6 +7,8 @@ mock_hardware as processes, the probe plays the planner and calls the executor's
 plan, a plan sent while inactive does not move the arm, activate runs plans again.
 """
 
+import threading
+
 import numpy as np
 import pytest
 import rclpy
@@ -149,3 +151,33 @@ def test_a_destroyed_executor_leaves_the_ros_graph(tmp_path):
         rclpy.shutdown(context=context)
         assert spin_until(executor, lambda: ("executor", "/") not in names(), 10.0)
         del node  # (kept alive until here: collection must not be what removes it)
+
+
+class _TickFault(RuntimeError):
+    pass
+
+
+def test_an_exception_in_the_control_loop_stops_the_arm_and_ends_the_spin(tmp_path):
+    """The control loop runs on its own thread; an exception there commands zero and is raised
+    in the thread that spins the node (as a callback's exception: ``common.run`` exits)."""
+    spec = launch_nodes("mock", **MANUAL)["executor"]
+    with node_with_driver(spec, tmp_path) as (node, driver, executor):
+        commands = []
+        driver.create_subscription(TwistStamped, "/arm/cmd_twist", commands.append, qos.COMMAND)
+        assert node.trigger_configure() == SUCCESS
+        assert spin_until(executor, lambda: node.cmd_pub.get_subscription_count() > 0, 10.0)
+        ticks = []
+
+        def failing_tick():
+            ticks.append(threading.get_ident())
+            if len(ticks) == 3:
+                raise _TickFault("tick failed")
+
+        node.on_tick = failing_tick  # the control thread calls what is set at activate
+        assert node.trigger_activate() == SUCCESS
+        with pytest.raises(_TickFault):
+            spin_until(executor, lambda: False, 10.0)
+        assert len(ticks) == 3 and set(ticks) != {threading.get_ident()}  # not this thread
+        assert spin_until(executor, lambda: commands, 5.0)
+        assert commands[-1].twist.linear.x == commands[-1].twist.linear.y == 0.0
+        assert not node.active

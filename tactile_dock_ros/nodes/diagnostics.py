@@ -3,7 +3,8 @@
 One ``DiagnosticStatus`` named ``<node>: guarded moves``: ERROR while a sensor stream is older
 than ``sensor_timeout`` (or never arrived), WARN while the control loop's longest tick interval
 in the last second exceeds two control periods, else OK. Its values: each stream's rate (Hz)
-and age (s), the control loop's rate and longest interval, the state, the plan counts
+and age (s), the control loop's rate and longest interval, its ticks since start and how many
+of them came more than two periods after the previous one (late), the state, the plan counts
 (run / refused / aborted), the last fault with its age, and what the caller adds (the
 executor: the episode its plans must belong to).
 """
@@ -24,8 +25,15 @@ class ExecutorHealth:
         self.sensor_timeout, self.control_period = sensor_timeout, control_period
         self.streams = {name: StreamWatch() for name in STREAMS}
         self.ticks = StreamWatch()
+        self.late_ticks = 0  # ticks more than two control periods after the previous one
         self.counts = {"plans_run": 0, "plans_refused": 0, "plans_aborted": 0}
         self.last_fault, self.last_fault_time = "", None
+
+    def tick(self, now: float) -> None:
+        """A control-loop tick began at ``now``."""
+        if self.ticks.last is not None and now - self.ticks.last > 2.0 * self.control_period:
+            self.late_ticks += 1
+        self.ticks.add(now)
 
     def fault(self, now: float, detail: str) -> None:
         self.last_fault, self.last_fault_time = detail, now
@@ -49,6 +57,8 @@ class ExecutorHealth:
         gap = self.ticks.max_gap(now)
         values["control_rate_hz"] = f"{self.ticks.rate(now):.1f}"
         values["control_max_period_s"] = f"{gap:.4f}"
+        values["control_ticks"] = str(self.ticks.count)
+        values["control_late_ticks"] = str(self.late_ticks)
         values["state"] = state
         values.update({k: str(v) for k, v in self.counts.items()})
         values["last_fault"] = self.last_fault

@@ -12,7 +12,10 @@ publishes ``cmd_twist`` (TwistStamped, base frame) at the control rate while a p
 in an unexpected frame are dropped with an error (tf2 is not used). The state machine and the
 safety checks (the force limit on the whole 3-D force, out-of-plane pushes included) are in
 ``execution.guarded``, the sensor watch and the episode admission of plans in ``nodes.watchdog``;
-this file is the ROS glue. An ABORTED report carries no segments: what an aborted attempt felt
+this file is the ROS glue. The control loop runs on a thread of its own
+(``nodes.control_thread``, SCHED_FIFO at ``thread_priority``), so that no subscription's
+deserialization or callback delays a command; it and the callbacks share the node's state
+under one lock. An ABORTED report carries no segments: what an aborted attempt felt
 is not evidence (a stale sensor or a stopped plan may have misread it).
 
 A managed (lifecycle) node, as ros2_control's and nav2's nodes that drive hardware: configure
@@ -30,7 +33,11 @@ publishers, and a plan waits up to ``connect_timeout`` for their first samples, 
 
 from __future__ import annotations
 
+import functools
+import gc
 import os
+import sys
+import threading
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -51,9 +58,22 @@ from tactile_dock_ros.nodes.common import (
     run,
     subscribe,
 )
+from tactile_dock_ros.nodes.control_thread import ControlThread
 from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.nodes.watchdog import Admission, EpisodeGate
+
+
+def _locked(method):
+    """Run ``method`` holding the node's state lock: the control thread and the executor's
+    callbacks share the plan, the sensor state, the filter and the publishers."""
+
+    @functools.wraps(method)
+    def holding_the_lock(self, *args, **kwargs):
+        with self.lock:
+            return method(self, *args, **kwargs)
+
+    return holding_the_lock
 
 
 def _tuning(name: str, *spec) -> Param:
@@ -77,9 +97,9 @@ NODE_PARAMS = [
     Param(
         "thread_priority",
         50,
-        "SCHED_FIFO priority of the thread that runs the control loop (0: the normal "
-        "scheduler); as ros2_control's controller manager: needs root or an rtprio limit, "
-        "else a warning and the normal scheduler",
+        "SCHED_FIFO priority of the control loop's own thread (0: the normal scheduler; "
+        "above 0 the callback thread also runs at nice -20); as ros2_control's controller "
+        "manager: needs root or an rtprio limit, else a warning and the normal scheduler",
         "",
         0,
         99,
@@ -159,6 +179,11 @@ class ExecutorNode(LifecycleNode):
         self.config_error = ""
         self.cmd_pub = None
         self.entities: list = []  # what configure created and cleanup destroys
+        self.lock = threading.RLock()  # see _locked
+        self.sensor_lock = threading.Lock()  # the latest pose and the force filter
+        self.control: ControlThread | None = None  # the control loop, while active
+        self.control_fault: BaseException | None = None
+        self.fault_guard = self.create_guard_condition(self.raise_control_fault)
         if self.node_params.autostart:
             self.start()
 
@@ -229,7 +254,6 @@ class ExecutorNode(LifecycleNode):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", qos.EVENTS)
         plane_id, base_id = p.plane_frame_id, p.base_frame_id
         wrench_id = base_id if p.wrench_frame == "base" else None  # else the sensor's frame
-        self.control_timer = self.create_timer(self.dt, self.on_tick, autostart=False)
         self.stream_subs = {
             "tool_pose": subscribe(
                 self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base_id
@@ -242,7 +266,6 @@ class ExecutorNode(LifecycleNode):
             *self.stream_subs.values(),
             subscribe(self, DockingPlan, "plan", self.on_plan, qos.EVENTS, plane_id),
             subscribe(self, EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED),
-            self.control_timer,
             self.create_timer(p.diagnostics_period, self.publish_diagnostics),
             self.cmd_pub,
             self.report_pub,
@@ -269,19 +292,34 @@ class ExecutorNode(LifecycleNode):
             self.get_logger().info(text)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Accept plans and run the control loop."""
-        self.active = True
-        self.control_timer.reset()
+        """Accept plans and start the control loop on its own thread (``ControlThread``)."""
+        with self.lock:
+            self.active = True
+        self.control = ControlThread(
+            self.on_tick,
+            self.dt,
+            self.node_params.thread_priority,
+            self.log_priority,
+            self.on_control_fault,
+        )
+        self.control.start()
         self.report_streams("active")
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop the arm now: a running plan is aborted (reported, no segments), a waiting one
         reported, a zero command sent in this callback; then refuse plans until activated."""
-        self.active = False
-        self.stop(DEACTIVATED)
-        self.control_timer.cancel()
+        with self.lock:
+            self.active = False  # a tick from here on commands nothing
+            self.stop(DEACTIVATED)
+        self.stop_control()
         return super().on_deactivate(state)
+
+    def stop_control(self) -> None:
+        """End the control thread (its last tick finishes first; idempotent)."""
+        if self.control is not None:
+            self.control.stop(timeout_s=10 * self.dt + 1.0)
+            self.control = None
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.release()
@@ -293,17 +331,17 @@ class ExecutorNode(LifecycleNode):
         callback): command zero and wait up to SHUTDOWN_ACK_S for the arm to acknowledge it, as
         a driver would otherwise go on with the last command until its own timeout."""
         if state is not None:
-            self.active = False
             self.release()
             return super().on_shutdown(state)
+        self.stop_control()
         if self.cmd_pub is not None:
-            self.command(np.zeros(2))
+            with self.lock:
+                self.command(np.zeros(2))
             self.cmd_pub.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_S))
         return SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         """A transition raised: stop the arm and release; the node is unconfigured after it."""
-        self.active = False
         self.release()
         return SUCCESS
 
@@ -320,10 +358,15 @@ class ExecutorNode(LifecycleNode):
         self.command(np.zeros(2))
 
     def release(self) -> None:
-        """A zero command, then destroy what configure created (idempotent)."""
+        """End the control loop, command zero, then destroy what configure created
+        (idempotent)."""
+        with self.lock:
+            self.active = False
+        self.stop_control()
         if self.cmd_pub is None:
             return
-        self.stop("executor released (lifecycle)")
+        with self.lock:
+            self.stop("executor released (lifecycle)")
         for entity in self.entities:
             if hasattr(entity, "cancel"):
                 self.destroy_timer(entity)
@@ -335,36 +378,49 @@ class ExecutorNode(LifecycleNode):
 
     # ---------------------------------------------------------------- topics
 
+    # The sensor callbacks take only ``sensor_lock`` (for microseconds), not the node's lock:
+    # at the streams' rates a thread that takes a lock again and again keeps a waiting thread
+    # from it (measured: 12 % of the control ticks late by more than a period with the sensors
+    # at 10x while the callbacks held the node's lock).
+
     def on_pose(self, msg: PoseStamped) -> None:
         tool = convert.pose_position(msg, self.plane)
+        rotation = None
         if self.p.wrench_frame == "tool":  # the rotation is computed only when it is used
-            self.tool_rotation = convert.pose_rotation(msg)
+            rotation = convert.pose_rotation(msg)
         else:  # but a NaN orientation is malformed input all the same
             q = msg.pose.orientation
             validate.finite("pose.orientation", [q.x, q.y, q.z, q.w])
-        self.tool = tool
+        with self.sensor_lock:
+            if rotation is not None:
+                self.tool_rotation = rotation
+            self.tool = tool
         self.health.streams["tool_pose"].add(now_seconds(self))
 
     def on_wrench(self, msg: WrenchStamped) -> None:
-        """Filter the force in the frame it comes in (the sensor bias is constant there)."""
+        """Filter the force in the frame it comes in (the sensor bias is constant there); a
+        force above the limit stops a running plan now, not at the next tick."""
         force = convert.wrench_force(msg)
         now = now_seconds(self)
         self.health.streams["wrench"].add(now)
-        self.filter.add(now, force)
-        run = self.run
-        if run is not None and not run.done and self.filter.ready:  # stop now, not next tick
-            total = float(np.linalg.norm(self.base_force()))
-            if total > self.limits.max_force:
-                run.abort(f"force {total:.1f} N (3-D) above the limit", self.tool)
-                self.command(np.zeros(2))
-                self.end_run(now)
+        with self.sensor_lock:
+            self.filter.add(now, force)
+            total = float(np.linalg.norm(self.base_force())) if self.filter.ready else 0.0
+        if total > self.limits.max_force:
+            with self.lock:
+                run = self.run
+                if run is not None and not run.done:
+                    run.abort(f"force {total:.1f} N (3-D) above the limit", self.tool)
+                    self.command(np.zeros(2))
+                    self.end_run(now)
 
     def base_force(self) -> np.ndarray:
-        """Bias-free filtered force (3,) newtons in the base frame."""
+        """Bias-free filtered force (3,) newtons in the base frame (hold ``sensor_lock``)."""
         if self.p.wrench_frame == "tool":
             return self.tool_rotation @ self.filter.value
         return self.filter.value
 
+    @_locked
     def on_plan(self, msg: DockingPlan) -> None:
         """Run, refuse (with a report; every DOCK plan while the node is inactive) or drop
         (MessageError: no report) a plan. Decision: a refused or dropped plan changes no state -
@@ -422,6 +478,7 @@ class ExecutorNode(LifecycleNode):
                 f"plan {plan.plan_id} of episode {plan.episode} after its plan {self.last_plan[1]}"
             )
 
+    @_locked
     def on_episode_status(self, msg: EpisodeStatus) -> None:
         """Stop a plan whose episode is over (the planner aborted or gave up) or superseded."""
         state, episode = convert.episode_status_from_msg(msg)
@@ -451,7 +508,8 @@ class ExecutorNode(LifecycleNode):
         stamps = [w.last for w in self.health.streams.values()]
         if all(s is not None and now - s <= self.limits.sensor_timeout for s in stamps):
             self.pending = None
-            self.filter.reset()
+            with self.sensor_lock:
+                self.filter.reset()
             self.run = GuardedRun(plan, self.tool, self.limits, self.settings, now)
             self.health.counts["plans_run"] += not self.run.done
             return
@@ -463,8 +521,13 @@ class ExecutorNode(LifecycleNode):
             self.command(np.zeros(2))
             self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
 
+    @_locked
     def on_tick(self) -> None:
-        self.health.ticks.add(now_seconds(self))
+        """One control period (the control thread): watch the producer, start a waiting plan,
+        step the running one and command its velocity; nothing while inactive."""
+        if not self.active:
+            return
+        self.health.tick(now_seconds(self))
         silent = now_seconds(self) - self.plan_heard[1]
         if silent > self.p.producer_timeout and self.busy():
             why = f"{PRODUCER_LOST} no copy of the plan for {silent:.1f} s"
@@ -481,10 +544,11 @@ class ExecutorNode(LifecycleNode):
         t = now_seconds(self)
         stream, age = self.health.oldest(t)
         velocity = np.zeros(2)
+        with self.sensor_lock:  # None: the F/T bias is being estimated at rest
+            force = self.base_force() if self.filter.ready else None
         if not run.done and age > self.limits.sensor_timeout:  # the stop within one tick
             run.abort(f"sensor timeout: {stream} {age:.2f} s old", self.tool)
-        elif not run.done and self.filter.ready:  # (else: estimating the F/T bias at rest)
-            force = self.base_force()
+        elif not run.done and force is not None:
             in_plane = self.plane.vector_to_plane(force)
             normal = float(np.sqrt(max(force @ force - in_plane @ in_plane, 0.0)))
             velocity = run.step(t, self.tool, in_plane, age, normal_force=normal)
@@ -507,6 +571,7 @@ class ExecutorNode(LifecycleNode):
         v3 = self.plane.vector_from_plane(velocity)
         self.cmd_pub.publish(convert.twist_to_msg(v3, header(self, self.p.base_frame_id)))
 
+    @_locked
     def publish_diagnostics(self) -> None:
         if not self.active:
             state = "inactive (plans refused)"
@@ -552,34 +617,69 @@ class ExecutorNode(LifecycleNode):
         if outcome is Outcome.ABORTED:
             self.get_logger().warning(f"plan {plan.plan_id}: ABORTED: {detail}")
 
+    def log_priority(self, refused: OSError | None) -> None:
+        """``thread_priority`` (SCHED_FIFO) of the control thread: set, or refused and why.
+        Decision: under CPU load the normal scheduler woke the control loop late (dropout stop
+        p99 65 ms, one 513 ms stall at load 5 on 2 cores); a SCHED_FIFO thread is woken when
+        its period ends. It waits between ticks, so it does not starve the machine."""
+        priority = self.node_params.thread_priority
+        if refused is None:
+            self.get_logger().info(f"control loop thread: SCHED_FIFO priority {priority}")
+            return
+        self.get_logger().warning(
+            f"thread_priority {priority}: real-time scheduling refused ({refused}); the control "
+            "loop runs with the normal scheduler (grant rtprio, e.g. limits.conf, or set 0)"
+        )
+
+    def before_spin(self) -> None:
+        """The thread that spins the node (``common.run``: takes the samples and plans) runs
+        with nice ``CALLBACK_NICE`` (when ``thread_priority`` > 0) and the GIL is handed over
+        every ``GIL_SWITCH_S``. Decision: the control thread needs the GIL, so the thread that
+        holds it must not stall: at the normal priority it was preempted by any busy process
+        while holding it (a priority inversion: control ticks 15 ms late at the median beside
+        4 CPU burners); as SCHED_FIFO, with the sensors at 10x it used a whole core and the
+        kernel's real-time throttling (``sched_rt_runtime_us``) stopped it, and with it the
+        control thread, for up to 100 ms. A high-weight normal thread is neither preempted for
+        long nor throttled. The objects that exist by now (modules, the node) are moved out of
+        the garbage collector's reach (``gc.freeze``): a full collection of them held the GIL
+        for 28 ms (more on a loaded machine) whichever thread ran it."""
+        gc.freeze()
+        sys.setswitchinterval(GIL_SWITCH_S)
+        if self.node_params.thread_priority == 0:
+            return
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), CALLBACK_NICE)
+        except (OSError, AttributeError) as err:  # reported by the control thread
+            self.get_logger().debug(f"callback thread nice {CALLBACK_NICE} refused: {err}")
+
+    def on_control_fault(self, err: BaseException) -> None:
+        """An exception in a tick (the control thread): stop the arm, then raise it in the
+        thread that spins the node (``raise_control_fault``), which exits as any callback's
+        exception does (``common.run``: zero command, clean up)."""
+        self.control_fault = err
+        self.get_logger().error(f"control loop failed: {err!r}")
+        with self.lock:
+            self.active = False
+            self.command(np.zeros(2))
+        self.fault_guard.trigger()
+
+    def raise_control_fault(self) -> None:
+        if self.control_fault is not None:
+            raise self.control_fault
+
     def destroy_node(self) -> None:
-        """Destroy the node with its lifecycle state machine. Decision: rclpy's LifecycleNode
-        keeps the state machine, which holds the node handle, until the object is collected, so
-        a destroyed executor stayed in the ROS graph (a second 'executor' that queries by name
-        found first: the fuzz check saw none of its subscriptions)."""
+        """Destroy the node with its control thread and its lifecycle state machine.
+        Decision: rclpy's LifecycleNode keeps the state machine, which holds the node handle,
+        until the object is collected, so a destroyed executor stayed in the ROS graph (a second
+        'executor' that queries by name found first: the fuzz check saw none of its
+        subscriptions)."""
+        self.stop_control()
         super().destroy_node()
         self._state_machine.destroy_when_not_in_use()
 
-    def before_spin(self) -> None:
-        """Run the calling thread (the one that spins the control timer, ``common.run``) with
-        real-time priority ``thread_priority``. Decision: under CPU load the normal scheduler
-        woke the control loop late (dropout stop p99 65 ms, one 513 ms stall at load 5 on 2
-        cores); a SCHED_FIFO thread is woken when its timer fires. The loop waits between
-        ticks, so it does not starve the machine (and the kernel keeps 5 % for other tasks)."""
-        priority = self.node_params.thread_priority
-        if priority == 0:
-            return
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        except (OSError, AttributeError) as err:  # no permission, or not Linux
-            self.get_logger().warning(
-                f"thread_priority {priority}: real-time scheduling refused ({err}); the control "
-                "loop runs with the normal scheduler (grant rtprio, e.g. limits.conf, or set 0)"
-            )
-            return
-        self.get_logger().info(f"control loop thread: SCHED_FIFO priority {priority}")
 
-
+CALLBACK_NICE = -20  # the nice value of the thread that runs the callbacks (before_spin)
+GIL_SWITCH_S = 0.001  # sys.setswitchinterval of the executor process (Python's default: 5 ms)
 SHUTDOWN_ACK_S = 0.5  # exit waits this long at most for the arm to acknowledge the stop
 
 

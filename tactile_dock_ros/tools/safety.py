@@ -30,6 +30,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 from std_srvs.srv import SetBool
 
@@ -103,6 +104,9 @@ class Recording:
     diagnostics: list = field(default_factory=list)  # (receive monotonic s, {key: value}, status)
 
 
+RECORD_COMMANDS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
 class Probe(Node):
     """Plays the planner and records the arm side; see the module docstring."""
 
@@ -114,7 +118,9 @@ class Probe(Node):
         self.next_id = 1
         self.plan_pub = self.create_publisher(DockingPlan, "/plan", qos.EVENTS)
         self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", qos.LATCHED)
-        self.create_subscription(TwistStamped, COMMAND, self.on_command, qos.COMMAND)
+        # every command, also while this node is busy republishing (the reader's queue fills
+        # on the DDS thread; a queue of 1 lost half the commands of the load test)
+        self.create_subscription(TwistStamped, COMMAND, self.on_command, RECORD_COMMANDS)
         self.create_subscription(ExecutionReport, "/execution_report", self.on_report, qos.EVENTS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, qos.EVENTS)
         if record_sensors:
@@ -636,6 +642,19 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _tick_counts(diagnostics: list[dict]) -> dict:
+    """Control ticks, late ticks and the longest tick interval (s) the executor reported
+    between the first and the last of ``diagnostics`` (its /diagnostics values)."""
+    if len(diagnostics) < 2:
+        return {"ticks": 0, "late": 0, "max_interval_s": None}
+    first, last = diagnostics[0], diagnostics[-1]
+    return {
+        "ticks": int(last["control_ticks"]) - int(first["control_ticks"]),
+        "late": int(last["control_late_ticks"]) - int(first["control_late_ticks"]),
+        "max_interval_s": max(float(d["control_max_period_s"]) for d in diagnostics[1:]),
+    }
+
+
 def control_jitter(
     probe: Probe,
     env: Envelope,
@@ -647,8 +666,10 @@ def control_jitter(
     ``burst_size`` more plans (refused: one runs; harmless free-space moves if one slipped
     through). Intervals between the stamps of consecutive commands of the run, and their
     jitter |interval - control period| (p50/p99/max, seconds); the same from the probe's
-    receive times; the refusals' details; the executor's diagnostics at the end and, given
-    its pid, its CPU use during the run (% of one core)."""
+    receive times; the executor's own count of control ticks during the run, of late ones
+    (more than 2 periods after the previous) and its longest tick interval (its diagnostics);
+    the refusals' details; the executor's diagnostics at the end and, given its pid, its CPU
+    use during the run (% of one core)."""
     tool = probe.tool(env)
     x = -0.5 if tool[0] > 0 else 0.5
     n_commands, n_reports = len(probe.rec.commands), len(probe.rec.reports)
@@ -685,5 +706,6 @@ def control_jitter(
             for k in ("wrench", "tool_pose")
         },
         "executor_cpu_percent": cpu,
+        "executor_ticks": _tick_counts(during),
         "diagnostics": probe.diagnostics(),
     }

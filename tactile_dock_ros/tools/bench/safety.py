@@ -160,11 +160,13 @@ def _load(args, log_dir: Path) -> dict:
                 pid = processes["executor"].pid
                 result = safety.control_jitter(probe, env, burst, executor_pid=pid)
             runs[name].append(result)
-            j, i = result["jitter_s"], result["interval_s"]
+            j, i, ticks = result["jitter_s"], result["interval_s"], result["executor_ticks"]
+            longest = ticks["max_interval_s"] or float("nan")
             print(
                 f"  {name:<8} rep {r}: {result['outcome']}, {result['commands']} commands, "
                 f"interval p50 {i['p50'] * 1e3:.2f} ms p99 {i['p99'] * 1e3:.2f} ms, jitter p50 "
-                f"{j['p50'] * 1e3:.2f} ms p99 {j['p99'] * 1e3:.2f} ms, executor received "
+                f"{j['p50'] * 1e3:.2f} ms p99 {j['p99'] * 1e3:.2f} ms; executor ticks "
+                f"{ticks['ticks']}, late {ticks['late']}, longest {longest * 1e3:.1f} ms; received "
                 f"{result['executor_rate_hz']['wrench']:.0f} Hz wrench, executor CPU "
                 f"{result['executor_cpu_percent']:.0f}%"
             )
@@ -197,12 +199,26 @@ def _load(args, log_dir: Path) -> dict:
         f"loaded {rates['loaded']:.0f} Hz; executor CPU baseline {cpu['baseline']:.0f}%, "
         f"loaded {cpu['loaded']:.0f}% of one core"
     )
+    own = {}  # the executor's count of its ticks, over all repetitions
+    for name in runs:
+        ticks = [run["executor_ticks"] for run in runs[name]]
+        total = sum(t["ticks"] for t in ticks)
+        own[name] = {
+            "ticks": total,
+            "late_percent": 100.0 * sum(t["late"] for t in ticks) / max(total, 1),
+            "longest_ms": max((t["max_interval_s"] or 0.0) for t in ticks) * 1e3,
+        }
+        print(
+            f"executor's own ticks ({name}): {own[name]['late_percent']:.2f} % of {total} more "
+            f"than 2 periods after the previous, longest interval {own[name]['longest_ms']:.1f} ms"
+        )
     not_ended = {name: sum(run["outcome"] != "NO_CONTACT" for run in runs[name]) for name in runs}
     print(f"plans not run to their end (aborted or no report): {not_ended}")
     return {
         "runs": runs,
         "table": table,
         "plans_not_ended": not_ended,
+        "executor_ticks": own,
         "executor_wrench_rate_hz": rates,
         "executor_cpu_percent": cpu,
     }

@@ -1,0 +1,110 @@
+"""ControlThread: the executor's control loop on a thread of its own (no ROS)."""
+
+import os
+import threading
+import time
+
+import pytest
+
+from tactile_dock_ros.nodes.control_thread import ControlThread
+
+PERIOD_S = 0.01
+
+
+def _thread(tick, priority=0):
+    events = {"priority": [], "fault": [], "done": threading.Event()}
+
+    def on_fault(err):
+        events["fault"].append(err)
+        events["done"].set()
+
+    control = ControlThread(tick, PERIOD_S, priority, events["priority"].append, on_fault)
+    return control, events
+
+
+def test_ticks_until_stopped_and_never_after():
+    ticks = []
+    started = threading.Event()
+
+    def tick():
+        ticks.append(threading.get_ident())
+        if len(ticks) >= 5:
+            started.set()
+
+    control, events = _thread(tick)
+    control.start()
+    assert started.wait(5.0)
+    control.stop()
+    n = len(ticks)
+    assert not control._thread.is_alive()
+    assert len(ticks) == n  # stop() returned after the last tick
+    assert set(ticks) == {control._thread.ident} != {threading.get_ident()}
+    assert events["fault"] == [] and events["priority"] == []  # priority 0: not touched
+
+
+def test_an_exception_ends_the_loop_and_goes_to_on_fault():
+    ticks = []
+
+    def tick():
+        ticks.append(1)
+        if len(ticks) == 2:
+            raise ValueError("bad tick")
+
+    control, events = _thread(tick)
+    control.start()
+    assert events["done"].wait(5.0)
+    control._thread.join(5.0)
+    assert not control._thread.is_alive() and len(ticks) == 2
+    assert isinstance(events["fault"][0], ValueError)
+
+
+def test_a_refused_priority_is_reported_and_the_loop_runs(monkeypatch):
+    def refuse(*args):
+        raise PermissionError("no rtprio")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    ran = threading.Event()
+    control, events = _thread(ran.set, priority=50)
+    control.start()
+    assert ran.wait(5.0)
+    control.stop()
+    (refused,) = events["priority"]
+    assert isinstance(refused, OSError) and "no rtprio" in str(refused)
+
+
+def test_a_late_tick_is_not_caught_up_with_a_burst():
+    """After a tick that overran 20 periods, the next ticks keep (about) their period."""
+    stamps = []
+    done = threading.Event()
+
+    def tick():
+        stamps.append(time.monotonic())
+        if len(stamps) == 2:
+            time.sleep(20 * PERIOD_S)
+        if len(stamps) == 6:
+            done.set()
+
+    control, _ = _thread(tick)
+    control.start()
+    assert done.wait(5.0)
+    control.stop()
+    # a catch-up burst would run ticks 3-6 back to back; the schedule restarts at tick 3 and
+    # the loop never ticks early (scheduling may only stretch this)
+    assert stamps[5] - stamps[2] >= 2.5 * PERIOD_S, stamps
+
+
+@pytest.mark.parametrize("timeout_s", [0.0, 1.0])
+def test_stop_from_the_control_thread_itself_does_not_deadlock(timeout_s):
+    holder = {}
+    done = threading.Event()
+
+    def tick():
+        holder["control"].stop(timeout_s)
+        done.set()
+
+    control, events = _thread(tick)
+    holder["control"] = control
+    control.start()
+    assert done.wait(5.0)
+    control._thread.join(5.0)
+    assert not control._thread.is_alive() and events["fault"] == []
