@@ -640,7 +640,12 @@ class ExecutorNode(LifecycleNode):
         4 CPU burners); as SCHED_FIFO, with the sensors at 10x it used a whole core and the
         kernel's real-time throttling (``sched_rt_runtime_us``) stopped it, and with it the
         control thread, for up to 100 ms. A high-weight normal thread is neither preempted for
-        long nor throttled. The objects that exist by now (modules, the node) are moved out of
+        long nor throttled. The switch interval is 0.1 ms: a thread that waits for the GIL
+        asks the holder to drop it only after a whole interval without a release, and the
+        callback thread, taking 1 kHz of samples, released and re-took it every few tenths of
+        a millisecond, so with 1 ms the control thread waited up to 400 ms (ticks late by more
+        than a period: 5.9 % at 1 ms, none at 0.1 ms, sensors at 10x on an idle machine). The
+        objects that exist by now (modules, the node) are moved out of
         the garbage collector's reach (``gc.freeze``): a full collection of them held the GIL
         for 28 ms (more on a loaded machine) whichever thread ran it."""
         gc.freeze()
@@ -679,7 +684,8 @@ class ExecutorNode(LifecycleNode):
 
 
 CALLBACK_NICE = -20  # the nice value of the thread that runs the callbacks (before_spin)
-GIL_SWITCH_S = 0.001  # sys.setswitchinterval of the executor process (Python's default: 5 ms)
+# sys.setswitchinterval of the executor process (Python's default: 5 ms); see before_spin
+GIL_SWITCH_S = 0.0001
 SHUTDOWN_ACK_S = 0.5  # exit waits this long at most for the arm to acknowledge the stop
 
 
