@@ -202,7 +202,7 @@ def _offered(qos_yaml) -> dict:
 
 
 EXPECTED_QOS = {  # what the nodes publish with (nodes.qos); latched topics replay latched
-    "/terrain_prior": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
+    "/terrain_prior": {"durability": "transient_local", "reliability": "reliable", "depth": 8},
     "/contact_history": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
     "/shape_samples": {"durability": "transient_local", "reliability": "reliable", "depth": 1},
     "/plan": {"durability": "volatile", "reliability": "reliable", "depth": 100},

@@ -15,7 +15,12 @@ Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.Received
 last ``max_holds``, as the planner keeps them); the episode samples on the hold its
 ``episode_status`` names (``EpisodeStatus.hold_id``; until that status came, the latest prior)
 and ``shape_samples`` carry that ``hold_id``: the planner plans only on samples of its episode's
-hold (the decision is in the planner's docstring).
+hold (the decision is in the planner's docstring). A node started after several captures
+receives every kept hold, oldest first (``qos.priors``). Each replayed prior that moves the
+selection (the latest, before the episode's status came) wakes the sampler; wake-ups coalesce
+and a result overtaken by a newer prior is dropped unpublished (Threads, below), so a replay
+costs no sampling per prior: when sampling is slower than the replay, one wasted call at most
+(with an empty history, prior draws, sampling is cheap either way).
 
 Restart without loss: with ``state_directory`` set, every report applied is journaled
 (``nodes.journal``, ``<state_directory>/inference.jsonl``) before the history is published, and a
@@ -120,9 +125,9 @@ class InferenceNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
         inputs = MutuallyExclusiveCallbackGroup()
         self.sampler = self.create_guard_condition(self.sample, MutuallyExclusiveCallbackGroup())
-        frame = self.frame_id
+        frame, priors = self.frame_id, qos.priors(self.p.max_holds)
         subscriptions = [
-            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, frame),
+            (ShapeDistribution, "terrain_prior", self.on_prior, priors, frame),
             (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, frame),
             (UInt32, "episode", self.on_episode, qos.LATCHED, None),
             (EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED, None),

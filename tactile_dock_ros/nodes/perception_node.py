@@ -13,12 +13,14 @@ on ``~/markers``; ``~/status`` (DiagnosticStatus, latched) carries the compute t
 Holds: every prior built (the first frame, each ``~/capture``, the problem's prior) is also kept
 as a hold (id from 1, capture stamp, prior) in a ``core.holds.HoldStore`` of ``max_holds``
 entries, the oldest dropped with a log; ``~/capture`` answers the id the capture gets ("hold N:
-..."). ``terrain_prior`` carries each new prior with its ``hold_id``: the planner and inference
-keep them by id too, so a ``/dock`` goal docks on the hold it names. ``/evaluate_hold``
-(``EvaluateHold``) returns per requested hold what the planner's first cycle would plan on it
-(``core.holds.evaluate_hold``: ``evaluate_samples`` prior draws seeded with ``evaluate_seed``,
-``core.planner.plan`` with the planner's settings) from the latest ``tool_pose`` or a given
-position, without moving the arm; an unknown id is answered ``found: false`` with a reason.
+..."). ``terrain_prior`` carries each new prior with its ``hold_id``, latched with the last
+``max_holds`` (``qos.priors``: a node started later receives every kept hold, oldest first): the
+planner and inference keep them by id too, so a ``/dock`` goal docks on the hold it names.
+``/evaluate_hold`` (``EvaluateHold``) returns per requested hold what the planner's first cycle
+would plan on it (``core.holds.evaluate_hold``: ``evaluate_samples`` prior draws seeded with
+``evaluate_seed``, ``core.planner.plan`` with the planner's settings) from the latest
+``tool_pose`` or a given position, without moving the arm; an unknown id is answered
+``found: false`` with a reason.
 
 Decision: this node serves ``/evaluate_hold`` because it owns the holds; the planner's settings
 it needs are four read-only parameters declared here from the planner's own table
@@ -101,7 +103,9 @@ class PerceptionNode(Node):
         self.rng = np.random.default_rng(self.p.seed)
         self.holds = HoldStore(self.p.max_holds)
         self.tool = None  # (2,) the latest tool position in the plane
-        self.prior_pub = self.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        self.prior_pub = self.create_publisher(
+            ShapeDistribution, "terrain_prior", qos.priors(self.p.max_holds)
+        )
         self.marker_pub = self.create_publisher(MarkerArray, "~/markers", qos.LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, "~/status", qos.LATCHED)
         self.create_service(Trigger, "~/capture", self.on_capture)

@@ -32,9 +32,11 @@ priors by id the same way and samples on the hold that ``episode_status`` names 
 its samples say which hold they were drawn from (``ShapeSamples.hold_id``) and the planner plans
 only on samples of its episode's hold, so the two cannot plan and sample on different priors.
 Asking perception to republish the chosen hold instead would add a service call and a wait state
-to goal handling and still leave inference racing the new prior against the episode start. A
-node started after a capture has received only the latest prior (``terrain_prior`` is latched
-with depth 1): it cannot dock on, or resume an episode on, an earlier hold.
+to goal handling and still leave inference racing the new prior against the episode start.
+``terrain_prior`` is latched with the last ``max_holds`` (``qos.priors``): a node started after
+several captures receives every hold perception keeps, oldest first and the latest last, so it
+docks on, or resumes an episode on, any of them; a replayed prior costs a conversion and, while
+idle, an ``episode_status`` (planning waits for samples).
 
 Restart without loss: with ``state_directory`` set, the episode's events (start with the goal's
 settings and hold, each plan with its serialized message, each report's outcome, the end) go to a
@@ -193,8 +195,9 @@ class PlannerNode(Node):
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
         self.status_pub = self.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
         plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
+        priors = qos.priors(self.p.max_holds)
         subscriptions = [
-            (ShapeDistribution, "terrain_prior", self.on_prior, qos.LATCHED, plane_id),
+            (ShapeDistribution, "terrain_prior", self.on_prior, priors, plane_id),
             (ContactHistory, "contact_history", self.on_history, qos.LATCHED, plane_id),
             (ShapeSamples, "shape_samples", self.on_samples, qos.LATCHED, plane_id),
             (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, plane_id),

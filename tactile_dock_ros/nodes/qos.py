@@ -2,8 +2,15 @@
 
 * ``SENSOR``: sensor streams (depth image, F/T wrench, tool pose): best effort, keep last 5 —
   a best-effort subscription also matches a reliable driver.
-* ``LATCHED``: state that a late joiner must see (prior, contact history, samples, episode
-  status): reliable, transient local, keep last 1.
+* ``LATCHED``: state that a late joiner must see (contact history, samples, episode status):
+  reliable, transient local, keep last 1.
+* ``priors(max_holds)``: ``terrain_prior``: as ``LATCHED`` but keep last ``max_holds`` (the
+  holds perception keeps), so a node that (re)starts after several captures receives every kept
+  hold, oldest first, ending on the latest, and can dock on (or resume an episode on) any of
+  them. Perception, planner and inference pass their own ``max_holds`` parameter, tools its
+  default; depth is no QoS compatibility policy, so any two depths match. Decision: the
+  publisher's depth is ``max_holds``, not the parameter's upper bound: a late joiner then gets
+  no hold perception dropped, and perception retains no more priors than it keeps.
 * ``EVENTS``: plans: reliable, volatile, keep last 100 (each is handled once; the planner resends
   the plan being executed every 0.5 s; a burst of plans must not push out the first of them:
   with 10, a loaded executor lost the running plan, ``bench safety --parts load``).
@@ -25,6 +32,17 @@ SENSOR = qos_profile_sensor_data
 LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
+
+
+def priors(max_holds: int) -> QoSProfile:
+    """The ``terrain_prior`` profile keeping the last ``max_holds`` priors."""
+    return QoSProfile(
+        depth=max_holds,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
 EVENTS = QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
 )

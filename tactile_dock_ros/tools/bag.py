@@ -43,6 +43,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from tactile_dock_ros.nodes import qos
+from tactile_dock_ros.nodes.common import MAX_HOLDS
 
 # Topics (absolute names, default remappings) and their types, as the nodes publish them.
 EPISODE_TOPICS = {
@@ -53,9 +54,10 @@ EPISODE_TOPICS = {
     "/execution_report": "tactile_dock_ros/msg/ExecutionReport",
     "/episode_status": "tactile_dock_ros/msg/EpisodeStatus",
 }
-# The QoS each topic is published with (nodes.qos): what a bag offers when it is played.
+# The QoS each topic is published with (nodes.qos; perception's default max_holds): what a bag
+# offers when it is played.
 QOS = {
-    "/terrain_prior": qos.LATCHED,
+    "/terrain_prior": qos.priors(MAX_HOLDS.default),
     "/contact_history": qos.LATCHED,
     "/shape_samples": qos.LATCHED,
     "/plan": qos.EVENTS,

@@ -103,7 +103,7 @@ class EpisodeClient(Node):
             for attribute in ("prior", "truth", "history", "status")
         }
         subscriptions = [
-            (ShapeDistribution, "/terrain_prior", keep["prior"], qos.LATCHED),
+            (ShapeDistribution, "/terrain_prior", keep["prior"], bag.QOS["/terrain_prior"]),
             (ShapeDistribution, "/mock_hardware/ground_truth", keep["truth"], qos.LATCHED),
             (ContactHistory, "/contact_history", keep["history"], qos.LATCHED),
             (EpisodeStatus, "/episode_status", keep["status"], qos.LATCHED),

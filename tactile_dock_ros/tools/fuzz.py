@@ -44,7 +44,7 @@ from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.execution.types import PlaneFrame
 from tactile_dock_ros.msg import ContactHistory, EpisodeStatus, ShapeDistribution
 from tactile_dock_ros.nodes import convert, qos
-from tactile_dock_ros.nodes.common import node_class
+from tactile_dock_ros.nodes.common import MAX_HOLDS, node_class
 from tactile_dock_ros.tools import bringup, fuzz_messages
 from tactile_dock_ros.tools.fuzz_messages import FuzzContext
 
@@ -236,7 +236,7 @@ class Fuzzer(Node):
         watched = [
             (ContactHistory, "/contact_history", qos.LATCHED),
             (EpisodeStatus, "/episode_status", qos.LATCHED),
-            (ShapeDistribution, "/terrain_prior", qos.LATCHED),
+            (ShapeDistribution, "/terrain_prior", qos.priors(MAX_HOLDS.default)),
             (PoseStamped, "/arm/tool_pose", qos.SENSOR),
             (WrenchStamped, "/ft_sensor/wrench", qos.SENSOR),
             (Image, "/camera/depth/image_raw", qos.SENSOR),
