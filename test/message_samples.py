@@ -48,6 +48,7 @@ def build() -> dict:
     return {
         "ShapeDistribution": ShapeDistribution(
             header=_header(1),
+            hold_id=5,
             num_vertices=3,
             mean=[0.0, 0.0, 0.5, 0.1, 1.0, -0.2],
             num_basis=2,
@@ -60,6 +61,7 @@ def build() -> dict:
         "ContactHistory": ContactHistory(header=_header(2), segments=segments),
         "ShapeSamples": ShapeSamples(
             header=_header(3),
+            hold_id=5,
             num_vertices=2,
             num_samples=3,
             samples=[0.5 * k for k in range(12)],
@@ -103,6 +105,7 @@ def build() -> dict:
             episode=1795315710,
             nonce=0x1234_5678_9ABC_DEF0,
             state=EpisodeStatus.GAVE_UP,
+            hold_id=5,
             detail="cycle budget of 2 spent",
             prior_vertices=12,
             cycles=cycles,
