@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tactile_dock_ros.tools import bench
-from tactile_dock_ros.tools.bench import docking
+from tactile_dock_ros.tools.bench import calibration, docking
 
 
 def test_docking_bench_small(tmp_path):
@@ -118,6 +118,26 @@ def test_attempt_calibration_scores_only_executed_attempts():
     assert set(bins) == {(0.1, 0.2), (0.9, 1.0)}
     assert bins[(0.1, 0.2)]["attempts"] == 3 and bins[(0.1, 0.2)]["docked"] == 0.0
     assert bins[(0.9, 1.0)]["attempts"] == 2 and bins[(0.9, 1.0)]["docked"] == 0.5
+    # equal bins of 0.1: [0.1, 0.2) 0.14 vs 0 docked (3), [0.9, 1] 0.975 vs 0.5 (2)
+    ece = (3 * (0.15 + 0.15 + 0.12) / 3 + 2 * abs((0.95 + 1.0) / 2 - 0.5)) / 5
+    assert cal["ece"] == pytest.approx(ece)
+    attempts = ([0.15, 0.95, 0.15, 0.12, 1.0], [0, 1, 0, 0, 0])
+    assert cal["spiegelhalter_z"] == pytest.approx(calibration.spiegelhalter_z(*attempts))
+
+
+def test_reliability_pngs_one_per_prior_and_mode(tmp_path):
+    episodes = [{"p_dock": [0.3, 0.8], "cycles": 2, "docked": True}]
+    rows = [
+        {"prior": prior, "mode": "compliant", "strategy": strategy, "episodes": episodes}
+        for prior in ("depth", "problem")
+        for strategy in ("ours", "gw")
+    ]
+    paths = docking.write_reliability_pngs(rows, tmp_path)
+    assert sorted(p.name for p in paths) == [
+        "reliability_depth_compliant.png",
+        "reliability_problem_compliant.png",
+    ]
+    assert all(p.stat().st_size > 0 for p in paths)
 
 
 def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):

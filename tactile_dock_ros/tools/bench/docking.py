@@ -24,7 +24,9 @@ where nothing was checked; beside it ``mass_rounds``, the re-seed rounds posteri
 
 Also reported, per prior, mode and strategy (problems pooled): how well the planner's predicted
 P_dock of each executed attempt matched what happened (``attempt_calibration``): the attempts,
-their mean prediction, the fraction that docked, the Brier score and a reliability table. A
+their mean prediction, the fraction that docked, the Brier score, the expected calibration
+error (10 equal bins), Spiegelhalter's z and a reliability table (``--calibration-png``: the
+reliability diagrams, ``tools.bench.calibration``). A
 planner that keeps predicting 15 % for attempts that dock 4 % of the time keeps exploring an
 infeasible terrain: the table measures that overconfidence instead of leaving it to be guessed
 from the give-up counts. With ``--workers N`` episodes run
@@ -52,6 +54,7 @@ from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.mock_camera import depth_prior
 from .. import package_files
+from . import calibration
 
 PRIORS = ("problem", "depth")
 MODES = ("compliant", "non-compliant")
@@ -132,6 +135,13 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
+    parser.add_argument(
+        "--calibration-png",
+        type=Path,
+        default=None,
+        help="write a reliability diagram of the attempts' P_dock per prior and mode into this "
+        "folder (reliability_<prior>_<mode>.png, one series per strategy)",
+    )
 
 
 @dataclass(frozen=True)
@@ -288,21 +298,29 @@ def _attempts(episode: dict) -> tuple[np.ndarray, np.ndarray]:
     return predicted, docked
 
 
-def attempt_calibration(results: list[dict]) -> list[dict]:
-    """Per (prior, mode, strategy), problems pooled: attempts, mean predicted P_dock, fraction
-    docked, Brier score (mean squared difference, lower is better) and per bin of
-    CALIBRATION_BINS (the last bin includes 1) the attempts, mean prediction and docked
-    fraction."""
+def attempts_by_group(results: list[dict]) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
+    """(prior, mode, strategy) -> (predicted P_dock, docked) of the executed attempts, problems
+    pooled; groups without an executed attempt are left out."""
     groups: dict[tuple, list[dict]] = {}
     for row in results:
         groups.setdefault((row["prior"], row["mode"], row["strategy"]), []).extend(row["episodes"])
-    out = []
-    for (prior, mode, strategy), episodes in groups.items():
+    out = {}
+    for key, episodes in groups.items():
         pairs = [_attempts(e) for e in episodes]  # a results row has at least one episode
         predicted = np.concatenate([p for p, _ in pairs])
-        docked = np.concatenate([d for _, d in pairs])
-        if not len(predicted):  # no episode executed an attempt
-            continue
+        if len(predicted):
+            out[key] = (predicted, np.concatenate([d for _, d in pairs]))
+    return out
+
+
+def attempt_calibration(results: list[dict]) -> list[dict]:
+    """Per (prior, mode, strategy), problems pooled: attempts, mean predicted P_dock, fraction
+    docked, Brier score (mean squared difference, lower is better), the expected calibration
+    error (``calibration.ECE_BINS`` equal bins), Spiegelhalter's z (|z| > 1.96 rejects
+    calibration) and per bin of CALIBRATION_BINS (the last bin includes 1) the attempts, mean
+    prediction and docked fraction."""
+    out = []
+    for (prior, mode, strategy), (predicted, docked) in attempts_by_group(results).items():
         which = np.clip(np.digitize(predicted, CALIBRATION_BINS) - 1, 0, len(CALIBRATION_BINS) - 2)
         bins = [
             {
@@ -324,15 +342,30 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
                 "predicted_mean": float(predicted.mean()),
                 "docked_fraction": float(docked.mean()),
                 "brier": float(np.mean((predicted - docked) ** 2)),
+                "ece": calibration.expected_calibration_error(predicted, docked),
+                "spiegelhalter_z": calibration.spiegelhalter_z(predicted, docked),
                 "bins": bins,
             }
         )
     return out
 
 
+def write_reliability_pngs(results: list[dict], folder: Path) -> list[Path]:
+    """One reliability diagram per (prior, mode), a series per strategy; the paths written."""
+    by_plot: dict[tuple, dict] = {}
+    for (prior, mode, strategy), arrays in attempts_by_group(results).items():
+        by_plot.setdefault((prior, mode), {})[strategy] = arrays
+    paths = []
+    for (prior, mode), series in by_plot.items():
+        path = Path(folder) / f"reliability_{prior}_{mode}.png"
+        calibration.reliability_png(path, f"executed attempts: {prior} prior, {mode}", series)
+        paths.append(path)
+    return paths
+
+
 CALIBRATION_HEADER = (
     f"{'prior':7} {'mode':13} {'strategy':8} {'attempts':>8} {'predicted':>9} {'docked':>6} "
-    f"{'brier':>5}  bins"
+    f"{'brier':>5} {'ECE':>5} {'z':>5}  bins"
 )
 
 
@@ -344,7 +377,8 @@ def _calibration_line(row: dict) -> str:
     )
     return (
         f"{row['prior']:7} {row['mode']:13} {row['strategy']:8} {row['attempts']:>8} "
-        f"{row['predicted_mean']:>9.2f} {row['docked_fraction']:>6.2f} {row['brier']:>5.3f}  {bins}"
+        f"{row['predicted_mean']:>9.2f} {row['docked_fraction']:>6.2f} {row['brier']:>5.3f} "
+        f"{row['ece']:>5.3f} {row['spiegelhalter_z']:>5.2f}  {bins}"
     )
 
 
@@ -554,6 +588,9 @@ def run(args) -> dict:
     print(CALIBRATION_HEADER)
     for row in calibration:
         print(_calibration_line(row))
+    if args.calibration_png is not None:
+        for path in write_reliability_pngs(results, args.calibration_png):
+            print(f"wrote {path}")
     return {
         "instances": instances,
         "max_cycles": max_cycles,

@@ -1,0 +1,77 @@
+"""How honest predicted probabilities are: expected calibration error, Spiegelhalter's test,
+reliability diagrams.
+
+Used on the P_dock of executed docking attempts (``bench docking``): each attempt predicted
+p in [0, 1] and docked (1) or not (0).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+ECE_BINS = 10  # equal-width bins of the predicted probability
+
+
+def _checked(predicted, outcome) -> tuple[np.ndarray, np.ndarray]:
+    p, y = np.asarray(predicted, float), np.asarray(outcome, float)
+    if p.ndim != 1 or p.shape != y.shape or not len(p):
+        raise ValueError("predicted and outcome must be non-empty 1-D arrays of one length")
+    if np.any(~np.isfinite(p)) or np.any((p < 0) | (p > 1)):
+        raise ValueError("predicted probabilities must lie in [0, 1]")
+    if np.any((y != 0) & (y != 1)):
+        raise ValueError("outcomes must be 0 or 1")
+    return p, y
+
+
+def equal_bins(predicted, bins: int = ECE_BINS) -> np.ndarray:
+    """Bin index (k,) of each prediction in ``bins`` equal bins of [0, 1] (1 in the last)."""
+    return np.minimum((np.asarray(predicted, float) * bins).astype(int), bins - 1)
+
+
+def expected_calibration_error(predicted, outcome, bins: int = ECE_BINS) -> float:
+    """ECE: sum over equal bins of (attempts in bin / attempts) x |mean predicted - observed
+    frequency| (Naeini et al. 2015). A calibrated predictor scores above 0 by chance, about
+    0.02-0.03 at 1,000 attempts."""
+    p, y = _checked(predicted, outcome)
+    which = equal_bins(p, bins)
+    counts = np.bincount(which, minlength=bins)
+    gap = np.abs(np.bincount(which, p, bins) - np.bincount(which, y, bins))
+    return float(gap.sum() / counts.sum())
+
+
+def spiegelhalter_z(predicted, outcome) -> float:
+    """Spiegelhalter's (1986) z statistic of the Brier score: standard normal when the outcomes
+    are Bernoulli(predicted); |z| > 1.96 rejects calibration at 5 %. 0 when every prediction
+    is 0 or 1 (no variance: the test says nothing)."""
+    p, y = _checked(predicted, outcome)
+    variance = np.sum((1 - 2 * p) ** 2 * p * (1 - p))
+    if variance <= 0:
+        return 0.0
+    return float(np.sum((y - p) * (1 - 2 * p)) / np.sqrt(variance))
+
+
+def reliability_png(path: Path, title: str, series: dict[str, tuple], bins: int = ECE_BINS):
+    """A reliability diagram: per series (name -> (predicted, outcome)), the observed docked
+    fraction against the mean prediction of each non-empty equal bin, marker area by attempts,
+    with the diagonal of perfect calibration; the legend gives each series' ECE."""
+    from .. import figures
+
+    plt = figures.pyplot()
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--")
+    for name, (predicted, outcome) in series.items():
+        p, y = _checked(predicted, outcome)
+        which = equal_bins(p, bins)
+        counts = np.bincount(which, minlength=bins)
+        used = counts > 0
+        mean_p = np.bincount(which, p, bins)[used] / counts[used]
+        freq = np.bincount(which, y, bins)[used] / counts[used]
+        ece = expected_calibration_error(p, y, bins)
+        (line,) = ax.plot(mean_p, freq, "-", lw=1, label=f"{name}: ECE {ece:.3f} ({len(p)})")
+        ax.scatter(mean_p, freq, s=8 + 60 * counts[used] / counts.max(), color=line.get_color())
+    ax.set(xlim=(0, 1), ylim=(0, 1), xlabel="predicted P_dock", ylabel="docked fraction")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    figures.save(fig, path)

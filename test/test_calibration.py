@@ -1,0 +1,65 @@
+"""Calibration statistics of predicted probabilities (tools.bench.calibration)."""
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.tools.bench import calibration
+
+
+def test_ece_of_a_known_table():
+    # bin [0.1, 0.2): 0.15 twice, docked once -> |0.15 - 0.5|; bin [0.9, 1]: 1.0 docked -> 0
+    predicted = [0.15, 0.15, 1.0]
+    docked = [0, 1, 1]
+    assert calibration.expected_calibration_error(predicted, docked) == pytest.approx(2 / 3 * 0.35)
+
+
+def test_perfect_bins_score_zero_and_a_constant_offset_scores_it():
+    predicted = np.repeat([0.05, 0.55], 20)
+    docked = np.concatenate([np.r_[np.ones(1), np.zeros(19)], np.r_[np.ones(11), np.zeros(9)]])
+    assert calibration.expected_calibration_error(predicted, docked) == pytest.approx(0.0)
+    assert calibration.expected_calibration_error(predicted + 0.3, docked) == pytest.approx(0.3)
+
+
+def test_spiegelhalter_accepts_bernoulli_outcomes_and_rejects_overconfidence():
+    """Over 40 seeds of 1,000 attempts drawn as Bernoulli(p): |z| <= 1.96 in about 95 % (at
+    least 34 of 40 allows for chance); predictions twice the docked rate: rejected every time."""
+    accepted = rejected = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        p = rng.uniform(0.0, 0.6, 1000)
+        docked = (rng.random(1000) < p).astype(float)
+        accepted += abs(calibration.spiegelhalter_z(p, docked)) <= 1.96
+        rejected += abs(calibration.spiegelhalter_z(np.minimum(2 * p, 1.0), docked)) > 1.96
+    assert accepted >= 34 and rejected == 40
+
+
+def test_ece_of_calibrated_draws_is_small_and_of_overconfident_ones_large():
+    rng = np.random.default_rng(7)
+    p = rng.uniform(0.0, 0.6, 2000)
+    docked = (rng.random(2000) < p).astype(float)
+    assert calibration.expected_calibration_error(p, docked) < 0.05
+    assert calibration.expected_calibration_error(np.minimum(2 * p, 1.0), docked) > 0.2
+
+
+def test_certain_predictions_give_no_test():
+    assert calibration.spiegelhalter_z([0.0, 1.0], [0, 1]) == 0.0
+
+
+@pytest.mark.parametrize(
+    "predicted, docked",
+    [([], []), ([0.5], [1, 0]), ([1.5], [1]), ([np.nan], [0]), ([0.5], [2]), ([[0.5]], [[1]])],
+)
+def test_bad_input_is_refused(predicted, docked):
+    with pytest.raises(ValueError):
+        calibration.expected_calibration_error(predicted, docked)
+    with pytest.raises(ValueError):
+        calibration.spiegelhalter_z(predicted, docked)
+
+
+def test_the_reliability_diagram_is_written(tmp_path):
+    rng = np.random.default_rng(1)
+    p = rng.uniform(0, 1, 200)
+    series = {"ours": (p, (rng.random(200) < p).astype(float)), "gw": (p, np.zeros(200))}
+    path = tmp_path / "out" / "reliability.png"
+    calibration.reliability_png(path, "test", series)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
