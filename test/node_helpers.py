@@ -63,6 +63,49 @@ def node_with_driver(spec, params_dir, extra_args: list[str] = (), executor_clas
 
 
 @dataclasses.dataclass
+class PlannerDriver:
+    """A driver node's ends of the planner's topics (``planner_driver``)."""
+
+    statuses: list  # episode_status received
+    plans: list  # plans received
+    prior: object  # terrain_prior publisher
+    history: object  # contact_history publisher
+    samples: object  # shape_samples publisher
+    pose: object  # tool_pose publisher
+
+    def matched(self) -> bool:
+        """Whether the planner subscribed every publisher."""
+        publishers = (self.prior, self.history, self.samples, self.pose)
+        return all(p.get_subscription_count() for p in publishers)
+
+
+def planner_driver(driver: Node, prior=None) -> PlannerDriver:
+    """Record episode_status and plan on ``driver`` and publish what the planner subscribes
+    (``prior``: a terrain_prior publisher made elsewhere, else one made here, latched)."""
+    from tactile_dock_ros.msg import (
+        ContactHistory,
+        DockingPlan,
+        EpisodeStatus,
+        ShapeDistribution,
+        ShapeSamples,
+    )
+
+    from tactile_dock_ros.nodes import qos
+
+    statuses, plans = [], []
+    driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
+    driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
+    return PlannerDriver(
+        statuses,
+        plans,
+        prior or driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED),
+        driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED),
+        driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED),
+        driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR),
+    )
+
+
+@dataclasses.dataclass
 class PlannerEpisode:
     """A running episode of the in-process planner (``planner_episode``): its node, the
     executor spinning it and the driver's publishers and records."""
@@ -83,44 +126,26 @@ def planner_episode(params_dir) -> Iterator[PlannerEpisode]:
     prior published, an episode started, an empty contact history published."""
     from ros_helpers import spin_until
     from std_srvs.srv import Trigger
-    from tactile_dock_ros.msg import (
-        ContactHistory,
-        DockingPlan,
-        EpisodeStatus,
-        ShapeDistribution,
-        ShapeSamples,
-    )
 
     from tactile_dock_ros.core import problems
     from tactile_dock_ros.core.episode import EpisodeState
-    from tactile_dock_ros.nodes import convert, qos
+    from tactile_dock_ros.nodes import convert
 
     spec = launch_nodes("mock")["planner"]
-    statuses, plans = [], []
     with node_with_driver(spec, params_dir) as (node, driver, executor):
-        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
-        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
-        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
-        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
-        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        ends = planner_driver(driver)
         start = driver.create_client(Trigger, "start_episode")
-        publishers = (prior, history, samples, pose)
-        assert spin_until(
-            executor,
-            lambda: (
-                start.service_is_ready() and all(p.get_subscription_count() for p in publishers)
-            ),
-            10.0,
-        )
+        assert spin_until(executor, lambda: start.service_is_ready() and ends.matched(), 10.0)
         shape = problems.get("sloper").prior
-        prior.publish(convert.shape_to_msg(shape, convert.Header()))
+        ends.prior.publish(convert.shape_to_msg(shape, convert.Header()))
         assert spin_until(executor, lambda: node.prior is not None, 10.0)
         future = start.call_async(Trigger.Request())
         assert spin_until(executor, future.done, 10.0) and future.result().success
         stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
-        history.publish(convert.history_to_msg(EpisodeState(), stamp))
-        yield PlannerEpisode(node, executor, shape, stamp, samples, pose, statuses, plans)
+        ends.history.publish(convert.history_to_msg(EpisodeState(), stamp))
+        yield PlannerEpisode(
+            node, executor, shape, stamp, ends.samples, ends.pose, ends.statuses, ends.plans
+        )
 
 
 def pose_msg(x: float, y: float, z: float) -> PoseStamped:

@@ -34,3 +34,10 @@ def spin_until(
     while not done() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
     return done()
+
+
+def send_goal(executor: SingleThreadedExecutor, client, goal):
+    """Send ``goal`` with the action ``client`` and return its goal handle (accepted or not)."""
+    future = client.send_goal_async(goal)
+    assert spin_until(executor, future.done, 10.0)
+    return future.result()

@@ -2,12 +2,13 @@
 state, one goal at a time, the overrides reach the episode, cancel ends it CANCELED."""
 
 import math
+from functools import partial
 
 import pytest
 from action_msgs.msg import GoalStatus
 from node_helpers import launch_nodes, node_with_driver
 from rclpy.action import ActionClient
-from ros_helpers import spin_until
+from ros_helpers import send_goal, spin_until
 from tactile_dock_ros.action import Dock
 from tactile_dock_ros.msg import EpisodeStatus, ShapeDistribution
 
@@ -39,11 +40,7 @@ def test_goals_are_checked_one_runs_at_a_time_and_cancel_ends_it_canceled(tmp_pa
         driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
         prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         client = ActionClient(driver, Dock, "/dock")
-
-        def send(goal):
-            future = client.send_goal_async(goal)
-            assert spin_until(executor, future.done, 10.0)
-            return future.result()
+        send = partial(send_goal, executor, client)
 
         try:
             assert spin_until(

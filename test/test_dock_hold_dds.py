@@ -10,15 +10,12 @@ from functools import partial
 import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
-from geometry_msgs.msg import PoseStamped
-from node_helpers import launch_nodes, node_with_driver, pose_msg
+from node_helpers import launch_nodes, node_with_driver, planner_driver, pose_msg
 from rclpy.action import ActionClient
-from ros_helpers import ros_node, spin_until
+from ros_helpers import ros_node, send_goal, spin_until
 from std_msgs.msg import UInt32
 from tactile_dock_ros.action import Dock
 from tactile_dock_ros.msg import (
-    ContactHistory,
-    DockingPlan,
     EpisodeStatus,
     ShapeDistribution,
     ShapeSamples,
@@ -55,28 +52,16 @@ def _state(node) -> tuple:
 
 def test_a_goal_docks_on_the_hold_it_names_and_an_unknown_hold_is_rejected(tmp_path):
     spec = launch_nodes("mock")["planner"]
-    statuses, plans = [], []
     with node_with_driver(spec, tmp_path) as (node, driver, executor):
-        driver.create_subscription(EpisodeStatus, "episode_status", statuses.append, qos.LATCHED)
-        driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
-        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
-        samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
-        pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        ends = planner_driver(driver)
+        statuses, plans, prior, history, samples, pose = vars(ends).values()
         client = ActionClient(driver, Dock, "/dock")
-        publishers = (prior, history, samples, pose)
-
-        def send(goal):
-            future = client.send_goal_async(goal)
-            assert spin_until(executor, future.done, 10.0)
-            return future.result()
+        send = partial(send_goal, executor, client)
 
         try:
             assert spin_until(
                 executor,
-                lambda: (
-                    client.server_is_ready() and all(p.get_subscription_count() for p in publishers)
-                ),
+                lambda: client.server_is_ready() and ends.matched(),
                 10.0,
             )
             _publish_holds(prior, executor, node)
@@ -169,27 +154,15 @@ def test_a_planner_started_after_three_captures_docks_on_the_first(tmp_path):
     """The planner starts after holds 1, 2, 3 were published: it keeps all three, 3 is the
     latest (what its idle status names), and a goal for hold 1 plans on hold 1's prior."""
     spec = launch_nodes("mock")["planner"]
-    statuses, plans = [], []
     with ros_node("perception") as (perception, _):
         captured = _captured(perception, 3)
         with node_with_driver(spec, tmp_path) as (node, driver, executor):
-            driver.create_subscription(
-                EpisodeStatus, "episode_status", statuses.append, qos.LATCHED
-            )
-            driver.create_subscription(DockingPlan, "plan", plans.append, qos.EVENTS)
-            history = driver.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
-            samples = driver.create_publisher(ShapeSamples, "shape_samples", qos.LATCHED)
-            pose = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+            ends = planner_driver(driver, prior=captured)
+            statuses, plans, _, history, samples, pose = vars(ends).values()
             client = ActionClient(driver, Dock, "/dock")
-            publishers = (captured, history, samples, pose)
             try:
                 assert spin_until(
-                    executor,
-                    lambda: (
-                        client.server_is_ready()
-                        and all(p.get_subscription_count() for p in publishers)
-                    ),
-                    10.0,
+                    executor, lambda: client.server_is_ready() and ends.matched(), 10.0
                 )
                 pose.publish(pose_msg(0.02, 0.0, 0.3))
                 assert spin_until(
@@ -204,9 +177,7 @@ def test_a_planner_started_after_three_captures_docks_on_the_first(tmp_path):
                 ), f"holds received: {node.priors.holds.ids()}"
                 assert node.priors.latest.hold_id == 3 and node.prior.n_vertices == 82
 
-                future = client.send_goal_async(Dock.Goal(hold_id=1))
-                assert spin_until(executor, future.done, 10.0)
-                handle = future.result()
+                handle = send_goal(executor, client, Dock.Goal(hold_id=1))
                 assert handle.accepted and node.hold_id == 1 and node.prior.n_vertices == 12
                 stamp = convert.Header(
                     stamp=driver.get_clock().now().to_msg(), frame_id="dock_plane"
