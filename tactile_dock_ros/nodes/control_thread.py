@@ -40,7 +40,6 @@ class ControlThread:
         self.on_priority, self.on_fault = on_priority, on_fault
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="control", daemon=True)
-        self.native_id: int | None = None  # the OS thread id once running (for checks)
 
     def start(self) -> None:
         self._thread.start()
@@ -52,7 +51,6 @@ class ControlThread:
             self._thread.join(timeout_s)
 
     def _run(self) -> None:
-        self.native_id = threading.get_native_id()
         if self.priority > 0:
             try:
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
