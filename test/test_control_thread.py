@@ -1,5 +1,6 @@
 """ControlThread: the executor's control loop on a thread of its own (no ROS)."""
 
+import itertools
 import os
 import threading
 import time
@@ -108,3 +109,51 @@ def test_stop_from_the_control_thread_itself_does_not_deadlock(timeout_s):
     assert done.wait(5.0)
     control._thread.join(5.0)
     assert not control._thread.is_alive() and events["fault"] == []
+
+
+def test_a_watchdog_deadline_ticks_once_between_periods():
+    """A deadline 1/4 into a long period gets one tick at it (not at the period's end), a
+    deadline already answered none, and the periodic schedule goes on."""
+    period_s = 0.4
+    stamps = []
+    done = threading.Event()
+    start = time.monotonic()
+    deadlines = {"value": start + 0.1 * period_s}
+
+    def tick():
+        stamps.append(time.monotonic())
+        if len(stamps) == 4:
+            done.set()
+
+    control = ControlThread(
+        tick, period_s, 0, lambda err: None, lambda err: None, lambda: deadlines["value"]
+    )
+    control.start()
+    assert done.wait(10.0)
+    control.stop()
+    offsets = [t - start for t in stamps]
+    # the first period's tick comes at its end: the deadline's comes first, once
+    assert 0.1 * period_s <= offsets[0] < 0.75 * period_s, offsets
+    assert [round(t / period_s) for t in offsets[1:]] == [1, 2, 3], offsets
+
+
+def test_a_deadline_that_moves_later_is_not_acted_on_early():
+    """The stream came back: the deadline moved past the period, so no extra tick."""
+    period_s = 0.2
+    stamps = []
+    done = threading.Event()
+
+    def deadline():  # always half a period ahead of now: never reached
+        return time.monotonic() + 0.5 * period_s
+
+    def tick():
+        stamps.append(time.monotonic())
+        if len(stamps) == 3:
+            done.set()
+
+    control = ControlThread(tick, period_s, 0, lambda err: None, lambda err: None, deadline)
+    control.start()
+    assert done.wait(10.0)
+    control.stop()
+    gaps = [b - a for a, b in itertools.pairwise(stamps)]
+    assert all(g >= 0.9 * period_s for g in gaps), gaps

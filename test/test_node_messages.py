@@ -1,6 +1,7 @@
 """Malformed messages are logged and dropped without corrupting a node's state (in-process)."""
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -77,6 +78,42 @@ def test_executor_drops_malformed_input_and_aborts_on_missing_sensors(tmp_path):
     third = convert.report_from_msg(reports[2])
     assert third.plan_id == 4 and third.outcome == ExecutionReport.ABORTED
     assert "sensor timeout" in third.detail
+
+
+def test_a_sensor_dropout_is_answered_at_its_timeout_not_at_the_next_tick(tmp_path):
+    """At 1 Hz control the periodic tick after a dropout comes up to 1 s late; the control
+    thread's watchdog stops the plan when the stream is ``sensor_timeout`` old."""
+    spec = launch_nodes("mock")["executor"]
+    timeout_s = 0.25
+    args = ["-p", "executor:control_rate_hz:=1.0", "-p", f"executor:sensor_timeout:={timeout_s}"]
+    reports, commands = [], []
+    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
+        plans = driver.create_publisher(DockingPlan, "plan", qos.EVENTS)
+        poses = driver.create_publisher(PoseStamped, "/arm/tool_pose", qos.SENSOR)
+        wrenches = driver.create_publisher(WrenchStamped, "/ft_sensor/wrench", qos.SENSOR)
+        driver.create_subscription(
+            ExecutionReport, "execution_report", lambda m: reports.append(time.monotonic()),
+            qos.EVENTS,
+        )  # fmt: skip
+        driver.create_subscription(
+            TwistStamped, "/arm/cmd_twist", lambda m: commands.append(m), qos.COMMAND
+        )
+        assert spin_until(executor, lambda: plans.get_subscription_count() > 0, 10.0)
+        fed = {"last": time.monotonic()}
+
+        def feed(done):
+            poses.publish(pose_msg(0.0, 0.6, 0.3))
+            wrenches.publish(WrenchStamped())
+            fed["last"] = time.monotonic()
+            return done()
+
+        plans.publish(_plan_msg(1, [[0.0, 0.3], [0.0, 0.1]]))
+        assert spin_until(executor, lambda: feed(lambda: node.run is not None), 10.0)
+        seen = len(commands)  # stop feeding right after a periodic tick's command
+        assert spin_until(executor, lambda: feed(lambda: len(commands) > seen), 5.0)
+        assert spin_until(executor, lambda: bool(reports), 5.0)
+    latency = reports[0] - fed["last"]
+    assert timeout_s <= latency < timeout_s + 0.4, latency  # the next tick: ~1 s
 
 
 def test_executor_remembers_a_bounded_number_of_plans(tmp_path):

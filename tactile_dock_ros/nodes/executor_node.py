@@ -38,6 +38,7 @@ import gc
 import os
 import sys
 import threading
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -82,6 +83,7 @@ def _tuning(name: str, *spec) -> Param:
 
 
 SEEN_PLANS = 64  # plan keys remembered to ignore resent copies
+WATCHDOG_MARGIN_S = 0.001  # the watchdog tick comes this long after a stream's timeout
 DEACTIVATED = "executor deactivated (lifecycle)"  # in the detail of a plan stopped by deactivate
 INACTIVE = "refused: executor inactive"  # the detail of a plan received while not active
 
@@ -238,6 +240,8 @@ class ExecutorNode(LifecycleNode):
         self.tool: np.ndarray | None = None
         self.tool_rotation = np.eye(3)  # tool frame -> base frame, from the latest pose
         self.health = ExecutorHealth(p.sensor_timeout, self.dt)
+        # monotonic arrival (s) of each stream's newest sample: the control thread's watchdog
+        self.arrived = {"tool_pose": -np.inf, "wrench": -np.inf}
         self.gate = EpisodeGate()
         self.run: GuardedRun | None = None
         self.pending = None  # (plan, time received) waiting for a tool pose
@@ -301,6 +305,7 @@ class ExecutorNode(LifecycleNode):
             self.node_params.thread_priority,
             self.log_priority,
             self.on_control_fault,
+            self.watchdog_deadline,
         )
         self.control.start()
         self.report_streams("active")
@@ -395,6 +400,7 @@ class ExecutorNode(LifecycleNode):
             if rotation is not None:
                 self.tool_rotation = rotation
             self.tool = tool
+        self.arrived["tool_pose"] = time.monotonic()
         self.health.streams["tool_pose"].add(now_seconds(self))
 
     def on_wrench(self, msg: WrenchStamped) -> None:
@@ -402,6 +408,7 @@ class ExecutorNode(LifecycleNode):
         force above the limit stops a running plan now, not at the next tick."""
         force = convert.wrench_force(msg)
         now = now_seconds(self)
+        self.arrived["wrench"] = time.monotonic()
         self.health.streams["wrench"].add(now)
         with self.sensor_lock:
             self.filter.add(now, force)
@@ -520,6 +527,15 @@ class ExecutorNode(LifecycleNode):
             why = f"no {' or '.join(missing)} received" if missing else "sensor data too old"
             self.command(np.zeros(2))
             self.report(plan, Outcome.ABORTED, f"sensor timeout: {why}")
+
+    def watchdog_deadline(self) -> float | None:
+        """Monotonic time (s) a running plan's older stream times out (``ControlThread``
+        ticks then, not at the next period), plus ``WATCHDOG_MARGIN_S`` so that the tick's
+        node-clock age is past ``sensor_timeout``; None with no plan running."""
+        run = self.run  # read without the node lock: a stale answer costs one extra tick
+        if run is None or run.done:
+            return None
+        return min(self.arrived.values()) + self.limits.sensor_timeout + WATCHDOG_MARGIN_S
 
     @_locked
     def on_tick(self) -> None:
