@@ -2,12 +2,14 @@
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from tactile_dock_ros.core import problems, simulate
 from tactile_dock_ros.tools import bench
-from tactile_dock_ros.tools.bench import calibration, docking
+from tactile_dock_ros.tools.bench import calibration, docking, splits
 
 
 def test_docking_bench_small(tmp_path):
@@ -16,6 +18,20 @@ def test_docking_bench_small(tmp_path):
     argv += ["--prior", "problem", "--mode", "compliant"]
     assert bench.main([*argv, "--strategies", "ours", "gw", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
+    assert report["split"] == "test" and report["clearly_infeasible_deg"] == 1.0  # the default
+    notch = problems.get("notch")
+    for record, entry in zip(report["truths"]["notch"], docking._truths(
+        SimpleNamespace(seed=0), "notch", 3, None, "test"
+    ), strict=True):  # fmt: skip
+        assert set(record["holding_margin_deg"]) == set(docking.MODES)
+        for mode, margin in record["holding_margin_deg"].items():
+            expected = simulate.holding_margin(notch, entry["truth"], mode == "compliant")
+            assert margin == pytest.approx(expected)
+            assert (margin < 0) == record["feasible"][mode]
+    for row in report["results"]:
+        margins = [t["holding_margin_deg"]["compliant"] for t in report["truths"]["notch"]]
+        assert [e["holding_margin_deg"] for e in row["episodes"]] == margins
+        assert row["clearly_infeasible"] + row["near_feasible"] == 3 - row["feasible"]
     assert [r["strategy"] for r in report["results"]] == ["ours", "gw"]
     for row in report["results"]:
         assert row["instances"] == 3 and len(row["episodes"]) == 3
@@ -43,6 +59,68 @@ def test_docking_bench_small(tmp_path):
         assert 0.0 <= cal["brier"] <= 1.0
 
 
+def test_splits_draw_disjoint_truths_and_train_keeps_the_old_seeds():
+    args = SimpleNamespace(seed=0)
+    for p_index, name in enumerate(problems.names()):
+        train, test = (docking._truths(args, name, 20, None, s) for s in ("train", "test"))
+        old = [  # the seeds bench docking drew before --split
+            problems.get(name).sample_ground_truth(np.random.default_rng([0, p_index, i]))
+            for i in range(20)
+        ]
+        np.testing.assert_array_equal([t["truth"] for t in train], old)
+        assert [t["seed"] for t in train] == [(0, p_index, i, 1) for i in range(20)]
+        assert all(t["seed"][:2] == (splits.TEST_KEY, 0) for t in test)
+        shared = [
+            (i, j)
+            for i, a in enumerate(train)
+            for j, b in enumerate(test)
+            if np.allclose(a["truth"], b["truth"])
+        ]
+        assert not shared
+    assert splits.split_seed("train", 3) == (3,)
+    assert splits.split_seed("test", 3) == (splits.TEST_KEY, 3)
+    for bad in (("valid", 0), ("test", -1), ("train", splits.MAX_SEED)):
+        with pytest.raises(ValueError):
+            splits.split_seed(*bad)
+
+
+def test_summary_splits_infeasible_truths_by_their_holding_margin():
+    """Clearly infeasible (margin >= 1 degree, or no contact at all): give-ups, their rate and
+    median cycles, the cycle cap; near-feasible (0 < margin < 1): mean cycles spent."""
+
+    def episode(margin, outcome, cycles, feasible=False):
+        return {
+            "feasible": feasible, "holding_margin_deg": margin, "outcome": outcome,
+            "cycles": cycles, "docked": outcome == "docked", "cycle_seconds": [0.1] * cycles,
+            "chains_disagree": [None] * cycles,
+        }  # fmt: skip
+
+    episodes = [
+        episode(-2.0, "docked", 2, feasible=True),
+        episode(5.0, "gave_up", 3),
+        episode(1.0, "gave_up", 6),  # exactly 1 degree: clearly infeasible
+        episode(None, "gave_up", 2),  # nothing to touch: inf
+        episode(12.0, "cycle_cap", 12),
+        episode(0.24, "cycle_cap", 12),  # near-feasible: cycles spent, not a failure
+        episode(0.62, "gave_up", 4),
+        episode(0.5, "perception_error", 0),  # no episode ran: not counted in the cycles
+    ]
+    row = docking._summary(episodes)
+    assert row["feasible"] == 1 and row["success_on_feasible"] == 1.0
+    assert row["clearly_infeasible"] == 4 and row["clearly_infeasible_gave_up"] == 3
+    assert row["clearly_infeasible_give_up_rate"] == pytest.approx(3 / 4)
+    assert row["clearly_infeasible_give_up_cycles_median"] == 3.0
+    assert row["clearly_infeasible_cycle_cap"] == 1
+    assert row["near_feasible"] == 3 and row["near_feasible_cycles_mean"] == pytest.approx(8.0)
+    assert row["errors"] == 1
+    assert "near" in docking.HEADER and docking._line(
+        {"problem": "notch", "prior": "problem", "mode": "compliant", "strategy": "ours", **row}
+    ).split()[9:14] == ["3/4", "3.0", "1", "3", "8.00"]
+    only_near = docking._summary(episodes[5:7])
+    assert only_near["clearly_infeasible_give_up_rate"] is None
+    assert only_near["clearly_infeasible_give_up_cycles_median"] is None
+
+
 def _episodes(instance_cycles, feasible=True):
     return [{"instance": i, "cycles": c, "feasible": feasible} for i, c in instance_cycles]
 
@@ -67,7 +145,8 @@ def test_episode_seeds_repeat_each_truth_with_its_own_sampler_seed(tmp_path):
     assert bench.main([*argv, "--episode-seeds", "2", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     (row,) = report["results"]
-    truth_seeds = {tuple(e["seed"][:4]) for e in row["episodes"]}
+    truths = docking._truths(SimpleNamespace(seed=0), "notch", 2, None, report["split"])
+    truth_seeds = {t["seed"] for t in truths}
     expected = [docking.episode_seed(t, r) for t in truth_seeds for r in (0, 1)]
     assert report["episode_seeds"] == 2 and row["instances"] == 4 and len(truth_seeds) == 2
     assert sorted(tuple(e["seed"]) for e in row["episodes"]) == sorted(expected)
@@ -77,7 +156,16 @@ def test_episode_seeds_repeat_each_truth_with_its_own_sampler_seed(tmp_path):
 def test_a_cycle_with_a_history_reports_its_chains_check(tmp_path):
     out = tmp_path / "checked.json"
     argv = ["docking", "--instances", "1", "--max-cycles", "2", "--problems", "three_ledges"]
-    argv += ["--prior", "problem", "--mode", "compliant", "--strategies", "ours"]
+    argv += [
+        "--prior",
+        "problem",
+        "--mode",
+        "compliant",
+        "--strategies",
+        "ours",
+        "--split",
+        "train",
+    ]
     assert bench.main([*argv, "--json", str(out)]) == 0
     (row,) = json.loads(out.read_text())["results"]
     (episode,) = row["episodes"]
@@ -158,7 +246,7 @@ def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):
 
 def _quick(tmp_path, name, *extra):
     out = tmp_path / name
-    argv = ["docking", "--quick", "--strategies", "ours", "--seed", "1"]
+    argv = ["docking", "--quick", "--strategies", "ours", "--seed", "1", "--split", "train"]
     if "--problems" not in extra:
         argv += ["--problems", "notch"]
     assert bench.main([*argv, *extra, "--json", str(out)]) == 0

@@ -1,5 +1,7 @@
 """Deterministic compliant simulator: hand-built cases, observations, eq. (19), feasibility."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -186,3 +188,80 @@ def test_plane_vector_helpers(values):
     np.testing.assert_array_equal(outward_normal(u), -perp(u))  # right of travel
     assert cross(u, perp(u)) == pytest.approx(u @ u, abs=1e-9)  # perp turns counter-clockwise
     np.testing.assert_array_equal(cross(np.stack([u, v]), v), [cross(u, v), cross(v, v)])
+
+
+ALPHA = np.degrees(np.arctan(MU))  # 26.57 degrees: the friction cone's half angle
+
+
+def _slope(degrees):
+    """One edge falling to the right at ``degrees`` (right to left: solid below)."""
+    s = np.tan(np.deg2rad(degrees))
+    return np.array([[1.0, -s], [-1.0, s]])
+
+
+@pytest.mark.parametrize("compliant", [True, False])
+def test_holding_margin_of_a_floor_and_of_slopes(compliant):
+    sloper = problems.get("sloper")  # mu = 0.5, load straight down
+    # flat floor, vertical load: the load sits on the cone's axis, atan(mu) to spare
+    margin = simulate.holding_margin(sloper, FLAT, compliant)
+    assert margin == pytest.approx(-ALPHA, abs=1e-9)
+    # slopes: holds by alpha - slope, or is that many degrees too steep (a slide falls off)
+    for degrees in (10.0, ALPHA - 0.3, ALPHA + 0.3, ALPHA + 5.0, 60.0):
+        margin = simulate.holding_margin(sloper, _slope(degrees), compliant)
+        assert margin == pytest.approx(degrees - ALPHA, abs=1e-9)
+    # a load tilted by beta from the floor's normal: beta - alpha
+    tilted = dataclasses.replace(sloper, load=np.array([np.sin(0.6), -np.cos(0.6)]))
+    margin = simulate.holding_margin(tilted, FLAT, compliant)
+    assert margin == pytest.approx(np.degrees(0.6) - ALPHA, abs=1e-9)
+    assert simulate.holding_margin(sloper, FLAT[::-1], compliant) == np.inf  # faces away
+
+
+def test_holding_margin_of_a_vertex_trap():
+    """A V of two 60 degree walls: each wall alone is 60 - alpha too steep, and a slide down
+    either wall is trapped at the bottom until the load tilts 30 degrees, where the other wall
+    stops facing it (the simulator separates there)."""
+    sloper = problems.get("sloper")
+    v = np.array([[1.0, np.sqrt(3.0)], [0.0, 0.0], [-1.0, np.sqrt(3.0)]])
+    assert simulate.holding_margin(sloper, v, compliant=True) == pytest.approx(-30.0)
+    assert simulate.holding_margin(sloper, v, compliant=False) == pytest.approx(60.0 - ALPHA)
+    # A 45 degree slope slides on into a pocket under a 45 degree roof: the pocket's floor,
+    # 3 degrees too steep, is reached only by that slide; the pocket's back wall overhangs by
+    # 13 degrees, so the slide separates there.
+    s = np.tan(np.deg2rad(ALPHA + 3.0))
+    pocket = np.array([[1, 1], [0, 0], [-0.5, -0.5 * s], [-0.2, 1.0], [0.3, 1.2], [-1.0, 2.5]])
+    assert simulate.holding_margin(sloper, pocket) == pytest.approx(3.0)
+    assert simulate.holding_margin(sloper, pocket, compliant=False) == pytest.approx(45 - ALPHA)
+    # CORNER's trap: the wall slid onto faces the load up to 90 degrees
+    assert (
+        simulate.holding_margin(sloper, CORNER)
+        < 0
+        < simulate.holding_margin(sloper, CORNER, compliant=False)
+    )
+
+
+@pytest.mark.parametrize("name", problems.names())
+@pytest.mark.parametrize("compliant", [True, False])
+def test_holding_margin_is_negative_exactly_on_feasible_truths(name, compliant):
+    problem = problems.get(name)
+    margins, feasible = [], []
+    for seed in range(40):
+        truth = problem.sample_ground_truth(np.random.default_rng([12, seed]))
+        margins.append(simulate.holding_margin(problem, truth, compliant))
+        feasible.append(simulate.feasible(problem, truth, compliant))
+    margins = np.array(margins)
+    np.testing.assert_array_equal(margins < 0, feasible)
+    assert np.all(np.isfinite(margins)) and np.all(margins != 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=8),
+    st.floats(-0.6, 0.6),
+    st.booleans(),
+)
+def test_holding_margin_sign_matches_feasible_on_random_profiles(heights, tilt, compliant):
+    sloper = problems.get("sloper")
+    problem = dataclasses.replace(sloper, load=np.array([np.sin(tilt), -np.cos(tilt)]))
+    truth = np.stack([np.linspace(1.0, -1.0, len(heights)), heights], axis=1)
+    margin = simulate.holding_margin(problem, truth, compliant)
+    assert (margin < 0) == simulate.feasible(problem, truth, compliant)

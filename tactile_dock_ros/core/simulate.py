@@ -23,6 +23,9 @@ The motion model of paper Sec. III-A2 and V-A, shared with the probabilistic sim
 Edge functionals (linear in an edge's direction vector t = d - c, also used by ``probsim``):
 ``friction_functionals(load, mu)`` gives rows wL, wR, wN with reaction r = -load:
 slide left iff ``wL . t > 0``, slide right iff ``wR . t > 0``, faces the load iff ``wN . t > 0``.
+In angles (``holding_margin``): with delta the signed angle from the outward normal to r
+(counter-clockwise positive), an edge facing the load sticks iff |delta| <= atan(mu), slides left
+iff delta > atan(mu) and right iff delta < -atan(mu).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .geometry2d import cross, perp, unit
+from .geometry2d import cross, outward_normal, perp, unit
 from .history import History, Status
 
 # Outcome codes of the batched simulation.
@@ -294,6 +297,7 @@ def feasible(problem, ground_truth, compliant: bool = True) -> bool:
     slides included, so vertex traps count). Approach paths from ``problem.start`` are not
     checked: the problems' starts are above the terrain, in the open. ``compliant=False``: only
     a move that sticks at its first contact docks (no slide into a vertex trap).
+    ``holding_margin`` says by how many degrees, on the same sites.
     """
     v = _validate_vertices(ground_truth, problem.prior.closed)
     starts, ends = docking_lines(v, problem.prior.closed, problem.load)
@@ -306,3 +310,121 @@ def feasible(problem, ground_truth, compliant: bool = True) -> bool:
         shapes[hit], problem.prior.closed, edge[hit], problem.load, problem.friction, compliant
     )
     return bool(np.any((outcome == STUCK_EDGE) | (outcome == STUCK_VERTEX)))
+
+
+def _reaction_angles(tangents: np.ndarray, load) -> np.ndarray:
+    """Signed angle in degrees, (-180, 180], from each edge's outward normal (t_y, -t_x) to the
+    reaction r = -load, counter-clockwise positive (> atan(mu): slides left, see module doc)."""
+    r = -unit(load, "load")
+    normal = outward_normal(tangents)
+    return np.degrees(np.arctan2(cross(normal, r), normal @ r))
+
+
+def _interval_margin(delta: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Signed angular distance (degrees) of ``delta`` to the arc [low, high] (high - low < 360):
+    minus the distance to the nearer end inside, the distance round the circle outside."""
+    inside = (delta >= low) & (delta <= high)
+    depth = np.minimum(delta - low, high - delta)
+    gap = np.minimum(np.mod(low - delta, 360.0), np.mod(delta - high, 360.0))
+    return np.where(inside, -depth, gap)
+
+
+def _slide_stops(cont: np.ndarray, closed: bool, first: np.ndarray, rightward: np.ndarray):
+    """Where compliant slides from the first-contact edges ``first`` (K,) stop, without a loop.
+
+    ``cont`` (E, 2): per edge, a slide left / right onto it continues (it faces the load and
+    slides on in the same sense). A slide right from edge e meets edges e+1, e+2, ... and stops
+    at the first that does not continue; a slide left meets e-1, e-2, .... Edges are laid out on
+    positions (open: the edges themselves; closed: three laps, e at e + E) so that the stop is
+    the nearest position without ``cont`` (a running min / max). Returns (stop edge (K,) or -1
+    where the polyline ends or a closed slide never stops, passed (E,) bool: edges slid over).
+    """
+    count = len(cont)
+    laps = 3 if closed else 1
+    size = laps * count
+    positions = np.arange(size)
+    of = positions % count
+    start = first + (count if closed else 0)
+    right_stop = np.where(~cont[of, 1], positions, size)
+    right_stop = np.append(np.minimum.accumulate(right_stop[::-1])[::-1], size)
+    left_stop = np.where(~cont[of, 0], positions, -1)
+    left_stop = np.insert(np.maximum.accumulate(left_stop), 0, -1)  # index p: first stop < p
+    stop = np.where(rightward, right_stop[start + 1], left_stop[start])
+    # slid over: positions strictly between start and stop
+    low = np.where(rightward, start + 1, stop + 1)
+    high = np.where(rightward, stop, start)
+    marks = np.zeros(size + 2, dtype=int)
+    np.add.at(marks, low + 1, 1)  # shifted by one: stop may be -1
+    np.add.at(marks, high + 1, -1)
+    passed = np.zeros(count, dtype=bool)
+    passed[of[np.cumsum(marks)[1 : size + 1] > 0]] = True
+    ends = (stop < 0) | (stop >= size)
+    return np.where(ends, -1, of[np.clip(stop, 0, size - 1)]), passed
+
+
+def holding_margin(problem, ground_truth, compliant: bool = True) -> float:
+    """Degrees by which the best docking site of ``feasible`` misses holding the load.
+
+    Negative: some loading move docks (``feasible`` is True), by that many degrees to spare;
+    positive: the load would have to turn by that many degrees (equivalently, the friction cone
+    widen, or the surface tilt) for the best site to hold; inf when no loading move touches the
+    terrain. ``holding_margin(...) < 0`` iff ``feasible(...)`` (up to rounding exactly at 0).
+
+    Sites are those of ``feasible``: the straight loading moves of ``docking_lines`` from outside
+    the bounding box and their first-contact edges; with ``compliant`` also every edge a
+    compliant slide from them passes over and the vertex where each slide ends. With delta an
+    edge's reaction angle (``_reaction_angles``: from its outward normal to r = -load) and
+    alpha = atan(mu):
+
+    * an edge holds iff |delta| <= alpha: margin |delta| - alpha (first-contact edges and edges
+      slid over always face the load);
+    * decision for a vertex trap: a slide arriving at a vertex stops there iff the next edge
+      faces the load and does not let it slide on (the simulator's rule). For a slide to the
+      right that is delta_next in [-alpha, 90) (left: (-90, alpha]): the reaction lies inside
+      the cone spanned by the two edges' friction cones, bounded on the side of the slide by
+      the next edge's friction cone, and short of the next edge's facing limit, where the
+      simulator separates. The margin is the signed angular distance of delta_next to that arc
+      (positive: degrees outside it), the nearer end counting. At a vertex the slide passes,
+      this equals the next edge's own edge margin; a polyline's end (or a closed slide that
+      never stops) cannot hold: inf.
+
+    Without ``compliant`` only the first-contact edges count. The minimum over the sites is
+    returned. Vectorized: the slides are followed by running minima over the edges
+    (``_slide_stops``).
+    """
+    closed = problem.prior.closed
+    v = _validate_vertices(ground_truth, closed)
+    if v.ndim != 2:
+        raise ValueError("holding_margin takes one shape (n, 2)")
+    starts, ends = docking_lines(v, closed, problem.load)
+    edges, _, _ = edge_index_arrays(len(v), closed)
+    c, d = v[edges[:, 0]], v[edges[:, 1]]
+    k = len(starts)
+    hit, edge, _, _ = first_hits(
+        np.broadcast_to(c, (k, *c.shape)), np.broadcast_to(d, (k, *d.shape)), starts, ends
+    )
+    if not np.any(hit):
+        return float("inf")
+    tangents = d - c
+    flags = _classify(tangents, problem.load, problem.friction)  # (E, 3) left, right, faces
+    delta = _reaction_angles(tangents, problem.load)
+    alpha = float(np.degrees(np.arctan(problem.friction)))
+    edge_margin = np.abs(delta) - alpha
+    first = np.unique(edge[hit])
+    best = float(np.min(edge_margin[first]))
+    if not compliant:
+        return best
+    sliding = flags[first, 0] | flags[first, 1]
+    first, rightward = first[sliding], flags[first[sliding], 1]
+    if not len(first):
+        return best
+    cont = flags[:, :2] & flags[:, 2:3]  # (E, 2): a slide left / right continues onto the edge
+    stop, passed = _slide_stops(cont, closed, first, rightward)
+    trap = _interval_margin(
+        delta[np.maximum(stop, 0)],
+        np.where(rightward, -alpha, -90.0),
+        np.where(rightward, 90.0, alpha),
+    )
+    trap = np.where(stop >= 0, trap, np.inf)
+    slid = edge_margin[passed]
+    return float(min(best, np.min(trap), np.min(slid) if len(slid) else np.inf))

@@ -1,8 +1,10 @@
 """Docking benchmark (paper Fig. 13, Sec. VI-A): ours vs growing window (GW) vs info gain (IG).
 
 For each problem, ``--instances`` ground truths are drawn from the problem's prior (seeded, the
-same truths whatever subset of problems runs). Every truth runs one episode per strategy, per
-prior and per mode:
+same truths whatever subset of problems runs) on the truths of ``--split`` (``tools.bench.splits``:
+``test``, the default, is held out and is what figures quote; ``train`` are the truths the
+planner was tuned on, as before the option, and anything tuned must use them; the JSON records
+the split). Every truth runs one episode per strategy, per prior and per mode:
 
 - prior ``problem``: the problem's hand-made prior; ``depth``: the prior the robot gets, the
   truth rendered by the mock profile's depth camera (``--perception-config``, 320x240, focal
@@ -11,9 +13,18 @@ prior and per mode:
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
   (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml).
 
+Each truth record carries, per mode, ``feasible`` (``simulate.feasible``: some straight loading
+move docks) and ``holding_margin_deg`` (``simulate.holding_margin``: degrees by which its best
+docking site misses holding, negative exactly when feasible; None when no loading move touches
+it). Infeasible truths are split by that margin: clearly infeasible (margin >=
+``CLEARLY_INFEASIBLE_DEG``, 1 degree), where the planner should give up, and near-feasible (below
+1 degree: a hold a degree of friction or slope from holding, which no prior can tell from a
+feasible one), whose episodes are cycles spent, not failures.
+
 Reported per problem, prior, mode and strategy: feasible count, success on feasible truths,
-cycles on feasible truths (mean, std, max), how infeasible truths end (the planner's give-up,
-its median cycles, or the cycle cap), errors, ours' mean cycles over the better baseline's with
+cycles on feasible truths (mean, std, max), how clearly infeasible truths end (the planner's
+give-up, its rate and median cycles, or the cycle cap), the near-feasible count and the mean
+cycles their episodes spent, errors, ours' mean cycles over the better baseline's with
 its 95 % bootstrap interval over the truths (``ratio_interval``), and the wall time of one cycle
 (inference + planning): median over all cycles, over the cycles after each episode's first (with
 a history), and the maximum; and ``disagree``, the fraction of the cycles whose sampler could
@@ -55,8 +66,10 @@ from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.mock_camera import depth_prior
 from .. import package_files
 from . import calibration
+from .splits import add_split_argument, split_seed
 
 PRIORS = ("problem", "depth")
+CLEARLY_INFEASIBLE_DEG = 1.0  # holding margin from which an infeasible truth is clearly so
 MODES = ("compliant", "non-compliant")
 PERCEPTION_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
 MOCK_PROFILE = Path(__file__).resolve().parents[3] / "config" / "mock.yaml"
@@ -134,6 +147,7 @@ def add_arguments(parser) -> None:
         "first as with 1): averages out outcomes that change from seed to seed",
     )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
+    add_split_argument(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
     parser.add_argument(
         "--calibration-png",
@@ -154,6 +168,7 @@ class _Task:
     truth: np.ndarray
     prior: GaussianShape | None  # None: no prior (perception failed)
     feasible: bool  # simulate.feasible in this mode
+    holding_margin: float | None  # simulate.holding_margin in this mode, degrees (None: inf)
     seed: tuple[int, ...]
     max_cycles: int
     samples: int
@@ -219,24 +234,35 @@ def _disagree(report) -> bool | None:
     return not report.converged
 
 
-def _truths(args, name: str, instances: int, config: PerceptionConfig | None) -> list[dict]:
-    """Per instance: truth, feasibility per mode and, when asked, its depth prior."""
+def _holding_margin(problem: problems.Problem, truth: np.ndarray, mode: str) -> float | None:
+    """``simulate.holding_margin`` in ``mode``, degrees; None (JSON) where it is inf."""
+    margin = simulate.holding_margin(problem, truth, mode == "compliant")
+    return float(margin) if np.isfinite(margin) else None
+
+
+def _truths(
+    args, name: str, instances: int, config: PerceptionConfig | None, split: str = "train"
+) -> list[dict]:
+    """Per instance: truth, feasibility and holding margin per mode and, when asked, its depth
+    prior; drawn from ``split``'s seeds (``splits.split_seed``; train: ``[seed, problem, i]``)."""
     p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
+    base = split_seed(split, args.seed)
     problem = _problem(name)
     out = []
     for i in range(instances):
-        truth = problem.sample_ground_truth(np.random.default_rng([args.seed, p_index, i]))
+        truth = problem.sample_ground_truth(np.random.default_rng([*base, p_index, i]))
         entry = {
             "instance": i,
             "truth": truth,
             "feasible": {
                 mode: bool(simulate.feasible(problem, truth, mode == "compliant")) for mode in MODES
             },
-            "seed": (args.seed, p_index, i, 1),
+            "holding_margin_deg": {mode: _holding_margin(problem, truth, mode) for mode in MODES},
+            "seed": (*base, p_index, i, 1),
         }
         if config is not None:
             try:
-                seen = depth_prior(truth, config, np.random.default_rng([args.seed, p_index, i, 2]))
+                seen = depth_prior(truth, config, np.random.default_rng([*base, p_index, i, 2]))
                 entry["depth"] = seen.prior
                 entry["calibration_error"] = seen.calibration_error.tolist()
             except PerceptionError as err:
@@ -247,20 +273,36 @@ def _truths(args, name: str, instances: int, config: PerceptionConfig | None) ->
 
 def _truth_record(truth: dict) -> dict:
     """The JSON part of a ``_truths`` entry: feasibility, calibration error, prior size."""
-    keep = ("instance", "feasible", "calibration_error", "perception_error")
+    keep = ("instance", "feasible", "holding_margin_deg", "calibration_error", "perception_error")
     record = {k: v for k, v in truth.items() if k in keep}
     if truth.get("depth") is not None:
         record["depth_prior_vertices"] = truth["depth"].n_vertices
     return record
 
 
+def _margin(episode: dict) -> float:
+    """The episode's truth's holding margin in its mode (None, or not recorded: inf)."""
+    margin = episode.get("holding_margin_deg")
+    return np.inf if margin is None else float(margin)
+
+
+ERRORS = ("error", "perception_error")
+
+
 def _summary(episodes: list[dict]) -> dict:
+    """One results row. Infeasible episodes are split by their truth's holding margin: clearly
+    infeasible (>= CLEARLY_INFEASIBLE_DEG) give the give-up count, rate (over all of them) and
+    median cycles and the cycle cap count; near-feasible ones (below it) only the mean cycles
+    they spent (episodes that ran: errors left out)."""
     feasible = [e for e in episodes if e["feasible"]]
     infeasible = [e for e in episodes if not e["feasible"]]
+    clear = [e for e in infeasible if _margin(e) >= CLEARLY_INFEASIBLE_DEG]
+    near = [e for e in infeasible if _margin(e) < CLEARLY_INFEASIBLE_DEG]
+    near_cycles = [e["cycles"] for e in near if e["outcome"] not in ERRORS]
     cycles = np.array([e["cycles"] for e in feasible], float)
     cycle_times = [t for e in episodes for t in e["cycle_seconds"]]
     later_times = [t for e in episodes for t in e["cycle_seconds"][1:]]  # with a history
-    give_up_cycles = [e["cycles"] for e in infeasible if e["outcome"] == "gave_up"]
+    give_up_cycles = [e["cycles"] for e in clear if e["outcome"] == "gave_up"]
     checked = [d for e in episodes for d in e["chains_disagree"] if d is not None]
     return {
         "instances": len(episodes),
@@ -272,12 +314,16 @@ def _summary(episodes: list[dict]) -> dict:
         "cycles_std": float(cycles.std()) if len(cycles) else None,
         "cycles_max": int(cycles.max()) if len(cycles) else None,
         "feasible_gave_up": sum(e["outcome"] == "gave_up" for e in feasible),
-        "infeasible_gave_up": len(give_up_cycles),
-        "infeasible_cycle_cap": sum(e["outcome"] == "cycle_cap" for e in infeasible),
-        "infeasible_give_up_cycles_median": float(np.median(give_up_cycles))
+        "clearly_infeasible": len(clear),
+        "clearly_infeasible_gave_up": len(give_up_cycles),
+        "clearly_infeasible_give_up_rate": len(give_up_cycles) / len(clear) if clear else None,
+        "clearly_infeasible_give_up_cycles_median": float(np.median(give_up_cycles))
         if give_up_cycles
         else None,
-        "errors": sum(e["outcome"] in ("error", "perception_error") for e in episodes),
+        "clearly_infeasible_cycle_cap": sum(e["outcome"] == "cycle_cap" for e in clear),
+        "near_feasible": len(near),
+        "near_feasible_cycles_mean": float(np.mean(near_cycles)) if near_cycles else None,
+        "errors": sum(e["outcome"] in ERRORS for e in episodes),
         "cycle_seconds_median": float(np.median(cycle_times)) if cycle_times else None,
         "later_cycle_seconds_median": float(np.median(later_times)) if later_times else None,
         "cycle_seconds_max": float(np.max(cycle_times)) if cycle_times else None,
@@ -442,9 +488,9 @@ def _interval(bounds) -> str:
 
 HEADER = (
     f"{'problem':13} {'prior':7} {'mode':13} {'strategy':8} {'feas':>5} {'succ':>5} "
-    f"{'cyc mean':>8} {'std':>5} {'max':>4} {'inf gave up':>11} {'inf cyc':>7} {'cap':>3} "
-    f"{'err':>3} {'/best':>5} {'95% CI':>9} {'s/cycle':>7} {'later':>6} {'max s':>6} "
-    f"{'disagree':>8}"
+    f"{'cyc mean':>8} {'std':>5} {'max':>4} {'clr gave up':>11} {'clr cyc':>7} {'cap':>3} "
+    f"{'near':>4} {'near cyc':>8} {'err':>3} {'/best':>5} {'95% CI':>9} {'s/cycle':>7} "
+    f"{'later':>6} {'max s':>6} {'disagree':>8}"
 )
 
 
@@ -454,9 +500,10 @@ def _line(row: dict) -> str:
         f"{row['feasible']:>2}/{row['instances']:<2} "
         f"{_fmt(row['success_on_feasible'], '.0%'):>5} {_fmt(row['cycles_mean'], '.2f'):>8} "
         f"{_fmt(row['cycles_std'], '.2f'):>5} {_fmt(row['cycles_max'], 'd'):>4} "
-        f"{row['infeasible_gave_up']:>5}/{row['instances'] - row['feasible']:<5} "
-        f"{_fmt(row['infeasible_give_up_cycles_median'], '.1f'):>7} "
-        f"{row['infeasible_cycle_cap']:>3} {row['errors']:>3} "
+        f"{row['clearly_infeasible_gave_up']:>5}/{row['clearly_infeasible']:<5} "
+        f"{_fmt(row['clearly_infeasible_give_up_cycles_median'], '.1f'):>7} "
+        f"{row['clearly_infeasible_cycle_cap']:>3} {row['near_feasible']:>4} "
+        f"{_fmt(row['near_feasible_cycles_mean'], '.2f'):>8} {row['errors']:>3} "
         f"{_fmt(row.get('ours_over_best_baseline'), '.2f'):>5} "
         f"{_interval(row.get('ours_over_best_baseline_ci95')):>9} "
         f"{_fmt(row['cycle_seconds_median'], '.3f'):>7} "
@@ -536,7 +583,7 @@ def run(args) -> dict:
     config = None
     if "depth" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    truths = {name: _truths(args, name, instances, config) for name in args.problems}
+    truths = {name: _truths(args, name, instances, config, args.split) for name in args.problems}
     keys = [
         (name, source, mode, strategy)
         for name in args.problems
@@ -552,6 +599,7 @@ def run(args) -> dict:
             truths[key[0]][i]["truth"],
             _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
             truths[key[0]][i]["feasible"][key[2]],
+            truths[key[0]][i]["holding_margin_deg"][key[2]],
             episode_seed(truths[key[0]][i]["seed"], repeat),
             max_cycles,
             args.samples,
@@ -566,7 +614,8 @@ def run(args) -> dict:
     for task, record in zip(tasks, records, strict=True):
         if record is not None:
             key = (task.problem, task.prior_source, task.mode, task.strategy)
-            rows[key].append({**record, "feasible": task.feasible})
+            margin = task.holding_margin
+            rows[key].append({**record, "feasible": task.feasible, "holding_margin_deg": margin})
     results = [
         {
             "problem": name,
@@ -592,6 +641,8 @@ def run(args) -> dict:
         for path in write_reliability_pngs(results, args.calibration_png):
             print(f"wrote {path}")
     return {
+        "split": args.split,
+        "clearly_infeasible_deg": CLEARLY_INFEASIBLE_DEG,
         "instances": instances,
         "max_cycles": max_cycles,
         "samples": args.samples,

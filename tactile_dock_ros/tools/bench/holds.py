@@ -1,9 +1,10 @@
 """First look at a hold (``/evaluate_hold``): latency, and how well its P_dock ranks holds.
 
 Held-out ground truths: ``--instances`` per problem drawn from a seed stream no other benchmark
-uses (``[seed, HELD_OUT, problem, i]``; ``bench docking`` draws ``[seed, problem, i]``, the
-truths the planner was tuned on). Each is seen as the robot sees it, through the mock
-profile's depth camera (``config/perception_mock.yaml``, a calibration error drawn per truth,
+uses (``[seed, HELD_OUT, problem, i]``; ``bench docking --split train`` draws ``[seed, problem,
+i]``, the truths the planner was tuned on, and ``--split test`` the stream of
+``tools.bench.splits``). Each is seen as the robot sees it, through the mock profile's depth
+camera (``config/perception_mock.yaml``, a calibration error drawn per truth,
 ``perception.mock_camera.depth_prior``), and each resulting prior is one hold. For every hold
 and mode (compliant, non-compliant) ``core.holds.evaluate_hold`` runs from the problem's start
 with the planner's settings (the mock profile's give-up threshold), ``--samples`` prior draws

@@ -17,7 +17,10 @@ energy score of the truth points matched to the seen mean vertices
 normal onto the truth; ``evaluation.deviation_score``; lower is better, also compared per
 terrain); the number of basis columns, the median per-edge angle std and the median
 correlation of neighbouring edges' angles. Deterministic per
-``--seed``; ``--repeats`` is unused (nothing is timed).
+``--seed`` and ``--split`` (``tools.bench.splits``: ``test``, the default, draws terrains and
+camera errors from a held-out seed stream and is what figures quote; ``train`` draws them as
+before the option and is what the depth model was tuned on; the JSON records the split);
+``--repeats`` is unused (nothing is timed).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from ...perception.depth import decode_depth, encode_depth
 from ...perception.render import render_depth
 from ...perception.terrain_prior import perceive
 from .. import package_files
+from .splits import add_split_argument, split_seed
 
 MOCK_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
 IMAGE = (320, 240)
@@ -60,6 +64,7 @@ def add_arguments(parser) -> None:
         default=1.0,
         help="scale of the drawn calibration error (0: a perfectly calibrated camera)",
     )
+    add_split_argument(parser)
 
 
 def mock_intrinsics(width: int = IMAGE[0], height: int = IMAGE[1], focal_px: float = FOCAL_PX):
@@ -68,8 +73,9 @@ def mock_intrinsics(width: int = IMAGE[0], height: int = IMAGE[1], focal_px: flo
     )
 
 
-def terrains(n_random: int, per_problem: int, seed: int):
-    """(label, truth vertices) of the suite, deterministic per seed."""
+def terrains(n_random: int, per_problem: int, seed):
+    """(label, truth vertices) of the suite, deterministic per seed (an int or a sequence, as
+    ``splits.split_seed`` gives)."""
     rng = np.random.default_rng(seed)
     for i in range(n_random):
         yield f"random_{i}", scenes.random_terrain(rng)
@@ -79,10 +85,24 @@ def terrains(n_random: int, per_problem: int, seed: int):
             yield f"{name}_{i}", problem.sample_ground_truth(rng)
 
 
+def terrain_seed(split: str, seed: int, index: int):
+    """The seed of the ``index``-th terrain's scoring: train ``1000 seed + 7 index`` (as before
+    ``--split``), test ``(*split_seed("test", seed), 1, index)`` (the 1 keeps it apart from the
+    terrains' own stream, ``split_seed``, which numpy pads with zeros)."""
+    base = split_seed(split, seed)
+    return 1000 * seed + 7 * index if split == "train" else (*base, 1, index)
+
+
+def _offset(seed, k: int):
+    """``seed + k`` for an int seed (train), ``(*seed, k)`` for a sequence (test)."""
+    return seed + k if isinstance(seed, (int, np.integer)) else (*seed, k)
+
+
 def score_terrain(
-    truth, config: PerceptionConfig, K, encoding: str, seed: int, calibration_scale: float = 1.0
+    truth, config: PerceptionConfig, K, encoding: str, seed, calibration_scale: float = 1.0
 ) -> dict:
-    """Both models' scores on one terrain ({"error": ...} when the camera makes no prior)."""
+    """Both models' scores on one terrain ({"error": ...} when the camera makes no prior);
+    ``seed``: an int, or a sequence (``terrain_seed``)."""
     rng = np.random.default_rng(seed)
     error = calibration_scale * rng.multivariate_normal(np.zeros(6), config.extrinsic.covariance)
     depth = render_depth(
@@ -98,7 +118,7 @@ def score_terrain(
         untailed = dataclasses.replace(config.occlusion, tail_m=0.0)
         cfg = dataclasses.replace(config, surface=surface, occlusion=untailed)
         try:
-            result = perceive(depth, K, cfg, np.random.default_rng(seed + 1))
+            result = perceive(depth, K, cfg, np.random.default_rng(_offset(seed, 1)))
         except PerceptionError as err:
             return {"error": str(err)}
         prior = result.prior
@@ -111,7 +131,7 @@ def score_terrain(
             error,
         )
         matched[result.hidden] = np.nan  # hidden vertices: the shared occlusion model
-        score = evaluation.deviation_score(prior, matched, np.random.default_rng(seed + 2))
+        score = evaluation.deviation_score(prior, matched, np.random.default_rng(_offset(seed, 2)))
         pts = evaluation.scored_truth_points(
             truth, result.slice.camera_xy, prior.mean_vertices, COVERAGE_SPACING_M
         )
@@ -162,8 +182,9 @@ def run(args) -> dict:
     config = PerceptionConfig.load(package_files.resolve(args.config))
     K = mock_intrinsics()
     rows, failed = [], []
-    for i, (label, truth) in enumerate(terrains(args.random, args.per_problem, args.seed)):
-        seed = 1000 * args.seed + 7 * i
+    base = split_seed(args.split, args.seed)
+    for i, (label, truth) in enumerate(terrains(args.random, args.per_problem, base)):
+        seed = terrain_seed(args.split, args.seed, i)
         out = score_terrain(truth, config, K, args.encoding, seed, args.calibration_scale)
         if "error" in out:
             failed.append({"terrain": label, "error": out["error"]})
@@ -210,6 +231,7 @@ def run(args) -> dict:
         )
     print(f"target coverage {TARGET_COVERAGE}; {len(failed)} terrains gave no prior")
     return {
+        "split": args.split,
         "config": str(args.config),
         "image": list(IMAGE),
         "focal_px": FOCAL_PX,
