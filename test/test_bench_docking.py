@@ -278,7 +278,8 @@ def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
     "bad",
     [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
      ["--samples", "1"], ["--max-cycles", "-2"], ["--give-up-threshold", "0"],
-     ["--give-up-threshold", "1.5"]],
+     ["--give-up-threshold", "1.5"], ["--seed", "-1"], ["--seed", str(2**22)],
+     ["--split", "validation"]],
 )  # fmt: skip
 def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:

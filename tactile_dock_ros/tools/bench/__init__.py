@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from . import splits
+
 SUITES = {
     # suite name -> one-line description
     "docking": "Fig. 13: ours vs GW vs IG per problem, on the problem and the depth-camera prior",
@@ -73,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    if hasattr(args, "split") and not 0 <= args.seed < splits.MAX_SEED:
+        parser.error(f"--seed must be in [0, {splits.MAX_SEED}) to keep the splits apart")
     try:
         results = modules[args.suite].run(args)
     except FileNotFoundError as err:  # an input file (package_files.resolve names the places)
