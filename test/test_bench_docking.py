@@ -244,6 +244,18 @@ def test_the_give_up_threshold_is_the_mock_profiles_unless_given(tmp_path):
     assert not eager[0]["feasible"] and eager[0]["outcome"] == "gave_up"
 
 
+def test_slide_on_slip_is_the_mock_profiles_unless_turned_off(tmp_path):
+    """Non-compliant episodes slide on after a slip as the mock profile's executor does;
+    ``--no-slide-on-slip`` runs them as before (the JSON says which)."""
+    assert docking.mock_slide_on_slip()  # config/mock.yaml, executor
+    argv = ["--problems", "sloper", "--prior", "problem", "--mode", "non-compliant"]
+    runs = {f: _quick(tmp_path, f"{f}.json", *argv, *f.split()) for f in ("", "--no-slide-on-slip")}
+    assert (
+        runs[""]["slide_on_slip"] is True and runs["--no-slide-on-slip"]["slide_on_slip"] is False
+    )
+    assert all(r["results"][0]["errors"] == 0 for r in runs.values())
+
+
 def _quick(tmp_path, name, *extra):
     out = tmp_path / name
     argv = ["docking", "--quick", "--strategies", "ours", "--seed", "1", "--split", "train"]

@@ -125,6 +125,29 @@ def test_slides_with_evidence_every_few_centimetres_end_in_a_give_up(monkeypatch
     assert dense >= 5 and dense - sparse >= 3, (dense, sparse)
 
 
+def test_a_non_compliant_slip_slides_on_as_evidence_with_slide_on_slip():
+    # the same first attempt (planned before any evidence) slips on the 24 cm slope of bench
+    # truth 1; with slide_on_slip it slides down to the lip, gives the slip rows of a compliant
+    # slide from its move (one slide group) and does not dock
+    problem, truth, prior, seed = _infeasible_bench_truth("sloper", 1, compliant=False)
+    rng = [*seed, 0]
+    runs = [
+        explore.run_episode(
+            problem, truth, "ours", np.random.default_rng(rng), 1, compliant=False,
+            slide_on_slip=slide, prior=prior,
+        )
+        for slide in (False, True)
+    ]  # fmt: skip
+    assert np.array_equal(runs[0].cycles_log[0].plan.path, runs[1].cycles_log[0].plan.path)
+    assert not any(r.docked for r in runs)
+    rows = [r.history for r in runs]
+    assert np.count_nonzero(rows[0].status == Status.SLIP_LEFT) == 1  # the first contact only
+    slips = rows[1].status == Status.SLIP_LEFT
+    assert np.count_nonzero(slips) >= 3
+    groups = slides.slide_groups(rows[1], np.ones(len(rows[1]), int))
+    assert len(groups) == 1 and len(groups[0]) == np.count_nonzero(slips)
+
+
 def test_same_seed_same_episode():
     problem, truth = _truth("sloper", False)
     runs = [explore.run_episode(problem, truth, "ours", np.random.default_rng(5), 6) for _ in "ab"]

@@ -36,8 +36,9 @@ def _plan(waypoints, speed=0.1, threshold=3.0, compliant=False):
 
 def _execute(
     terrain, waypoints, limits=LIMITS, settings=SETTINGS, speed=0.1, start=None,
-    compliant=False, lateral_stiffness=None,
+    compliant=False, lateral_stiffness=None, forces=None,
 ):  # fmt: skip
+    """Run the plan to its end; ``forces`` (a list) collects |force| at every tick."""
     start = waypoints[0] if start is None else start
     sim = PointToolSim(terrain, False, 0.5, 500.0, start, lateral_stiffness=lateral_stiffness)
     run = GuardedRun(_plan(waypoints, speed, compliant=compliant), sim.tool, limits, settings, 0.0)
@@ -47,6 +48,8 @@ def _execute(
             break
         velocity = run.check_next(sim.tool, run.step(t, sim.tool, sim.force, 0.0), DT)
         commanded.append(velocity)
+        if forces is not None:
+            forces.append(float(np.linalg.norm(sim.force)))
         sim.step(velocity, DT)
         t += DT
     assert run.done
@@ -155,6 +158,51 @@ def test_compliant_plan_sticks_at_once_on_a_floor_and_bounds_long_slides():
         lateral_stiffness=25.0,
     )  # fmt: skip
     assert run.outcome is Outcome.CONTACT_FAILED and "max_slide" in run.detail
+
+
+def test_a_non_compliant_plan_with_slide_on_slip_slides_for_evidence_but_never_docks():
+    slide = Settings(slide_on_slip=True)
+    loading = [[0.0, 0.2], [0.0, -0.5]]
+    stiff, *_ = _execute(BENT_SLOPE_THEN_CLIFF, loading, lateral_stiffness=25.0)
+    assert list(stiff.history.status) == [Status.FREE, Status.SLIP_LEFT]  # the slip ends it
+    forces = []
+    run, sim, _ = _execute(
+        BENT_SLOPE_THEN_CLIFF, loading, settings=slide, lateral_stiffness=25.0, forces=forces
+    )
+    assert run.outcome is Outcome.CONTACT_FAILED and "lost contact" in run.detail, run.detail
+    # the rows of a compliant slide: the first contact, then one per 4 cm of the 57-degree edge
+    status = run.history.status
+    assert status[0] == Status.FREE and np.all(status[1:] == Status.SLIP_LEFT)
+    assert len(status) - 2 == 3, len(status)
+    np.testing.assert_allclose(run.history.a[:2], stiff.history.a, atol=1e-3)  # same contact
+    middles = 0.5 * (run.history.a[2:] + run.history.b[2:])
+    assert middles.mean(axis=0) == pytest.approx([0.102, -0.117], abs=0.006)  # the edge's middle
+    # force limits: the push pauses at the load force, never near the limit
+    assert max(forces) < min(slide.load_force + 3.0, LIMITS.max_force)
+    assert np.linalg.norm(sim.force) < 3.0  # retreated off the surface
+    # a slide longer than max_slide stops there with the first contact as its only evidence
+    short = Settings(slide_on_slip=True, max_slide=0.05)
+    cut, *_ = _execute(BENT_SLOPE_THEN_CLIFF, loading, settings=short, lateral_stiffness=25.0)
+    assert cut.outcome is Outcome.CONTACT_FAILED and "max_slide" in cut.detail, cut.detail
+    assert list(cut.history.status) == [Status.FREE, Status.SLIP_LEFT]
+    slid = float(cut.detail.split("slid ")[1].split(" m")[0])
+    assert short.max_slide - 0.001 < slid < short.max_slide + 0.01
+
+
+def test_a_non_compliant_slide_on_slip_into_a_vertex_trap_fails_with_the_first_contact():
+    # the planner's non-compliant P_dock is of a first contact that sticks (core.simulate):
+    # a slide that then sticks in a trap is not a dock, and shows only its first contact
+    loading = [[0.05, 0.3], [0.05, -0.1]]  # meets the right slope 5 cm from the vertex
+    forces = []
+    run, *_ = _execute(
+        V_TRAP, loading, settings=Settings(slide_on_slip=True), lateral_stiffness=25.0,
+        forces=forces,
+    )  # fmt: skip
+    assert run.outcome is Outcome.CONTACT_FAILED and "stuck" in run.detail, run.detail
+    assert "not a dock" in run.detail
+    assert list(run.history.status) == [Status.FREE, Status.SLIP_RIGHT]
+    assert np.linalg.norm(run.stop_point) < 0.03  # slid into the vertex, retreated from there
+    assert max(forces) < LIMITS.max_force
 
 
 def test_contact_on_a_prefix_move_is_a_collision():

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile_dock_ros.core import problems, simulate
+from tactile_dock_ros.core import explore, problems, simulate, slides
 from tactile_dock_ros.core.geometry2d import cross, outward_normal, perp
 from tactile_dock_ros.core.history import Status
 from tactile_dock_ros.core.simulate import Feature
@@ -77,6 +77,57 @@ def test_notch_traps_and_slope_continues():
     smooth = np.array([[1.0, 1.0], [0.1, 0.1], [-1.0, -1.0]])
     ex = _run(smooth, [[0.6, 2.0], [0.6, 0.0]])
     assert not ex.docked and ex.stop_feature == Feature("vertex", 2)
+
+
+# 45 degrees down to the left, then a 53 degree edge 15 cm long, then a wall down to a floor: a
+# slip on the first edge slides right over the whole second edge and separates at the wall's top
+BENT_SLOPE_WALL = np.array([[0.3, 0.3], [0.18, 0.18], [0.09, 0.06], [0.09, -0.3], [-0.3, -0.3]])
+BENT_LOAD_MOVE = [[0.24, 0.6], [0.24, 0.0]]  # first contact on edge 0 at (0.24, 0.24)
+
+
+def _slide(vertices, path, **options):
+    return simulate.guarded_path(
+        vertices, False, np.array(path, float), MU, DOWN, False, 0.01, **options
+    )
+
+
+def test_a_non_compliant_slide_on_slip_is_evidence_along_the_face_up_to_max_slide():
+    rigid = _slide(BENT_SLOPE_WALL, BENT_LOAD_MOVE)
+    assert rigid.stop_feature == Feature("edge", 0) and not rigid.separated
+    run = _slide(BENT_SLOPE_WALL, BENT_LOAD_MOVE, slide_on_slip=True)
+    assert not run.docked and run.separated and run.stop_feature == Feature("vertex", 2)
+    assert np.array_equal(run.observations.status, rigid.observations.status)  # first contact
+    evidence = explore.slide_evidence(BENT_SLOPE_WALL, False, run, DOWN, 0.01)
+    rows = evidence.subset(np.arange(len(rigid.observations), len(evidence)))
+    # one slip row per 4 cm of the 15 cm edge 1, each crossing it (the face it slid along)
+    assert len(rows) == 4 and np.all(rows.status == Status.SLIP_RIGHT)
+    c, d = BENT_SLOPE_WALL[1], BENT_SLOPE_WALL[2]
+    middle = 0.5 * (rows.a + rows.b)
+    assert np.allclose(cross(d - c, middle - c) / np.linalg.norm(d - c), 0.0, atol=1e-9)
+    gaps = np.linalg.norm(np.diff(middle, axis=0), axis=1)
+    assert np.all(gaps <= slides.EVIDENCE_SPACING_M + 1e-9)
+    moves = np.ones(len(evidence), int)
+    assert slides.consistent_with_slides(BENT_SLOPE_WALL[None], False, evidence, moves, DOWN, MU)[0]
+    # the wall's top is 0.234 m from the first contact: a shorter max_slide cuts the slide
+    # before it separates, and the first contact is all it shows
+    for max_slide in (0.2, 0.05, 0.0):
+        cut = _slide(BENT_SLOPE_WALL, BENT_LOAD_MOVE, slide_on_slip=True, max_slide=max_slide)
+        assert not cut.docked and not cut.separated and cut.stop_feature == Feature("edge", 0)
+        assert np.array_equal(cut.observations.a, rigid.observations.a)
+    assert _slide(BENT_SLOPE_WALL, BENT_LOAD_MOVE, slide_on_slip=True, max_slide=0.24).separated
+    with pytest.raises(ValueError, match="max_slide"):
+        _slide(BENT_SLOPE_WALL, BENT_LOAD_MOVE, slide_on_slip=True, max_slide=np.inf)
+
+
+def test_a_non_compliant_slide_into_a_vertex_trap_does_not_dock_as_the_planner_predicts():
+    path = [[0.6, 2.0], [0.6, 0.0]]  # NOTCH: a compliant slide is trapped at vertex 2
+    run = _slide(NOTCH, path, slide_on_slip=True, max_slide=1.0)
+    assert not run.docked and not run.separated and run.stop_feature == Feature("vertex", 2)
+    assert _run(NOTCH, path).docked  # compliant: the same slide docks there
+    # the planner's non-compliant estimate (eq. 19) is of the same event
+    assert not simulate.dock_outcomes(NOTCH, False, path, MU, DOWN, compliant=False)[0]
+    floor = _slide(FLAT, [[0.2, 1.0], [0.2, -1.0]], slide_on_slip=True)
+    assert floor.docked and not floor.separated  # a first contact that sticks still docks
 
 
 def test_prefix_collision_and_no_contact():

@@ -128,7 +128,10 @@ class PlannerConfig:
             likely-obstacle-region margin.
         give_up_threshold: give up when the best docking probability is below it, in [0, 1).
         objective: one of ``OBJECTIVES`` (``planner.score``).
-        compliant: motion model of the probabilistic simulation (Sec. V-A).
+        compliant: motion model of the probabilistic simulation (Sec. V-A). Non-compliant:
+            a move docks only where its first contact sticks, also when the executor slides
+            on after a slip (``slide_on_slip``, ``simulate.guarded_path``: evidence only), so
+            the prediction needs no setting of its own.
         max_path_attempts: at most this many candidate sites are path-planned, >= 1.
     """
 

@@ -90,6 +90,7 @@ def run_episode(
     method: str = "hmc",
     give_up_threshold: float = 1e-3,
     compliant: bool = True,
+    slide_on_slip: bool = False,
     keep_samples: int = 20,
     prior: GaussianShape | None = None,
     observe: Callable[[CycleView], None] | None = None,
@@ -104,6 +105,10 @@ def run_episode(
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
+    ``slide_on_slip`` (non-compliant episodes; the executor's ``slide_on_slip``): a slip at the
+    first contact goes on as a slide of at most ``simulate.MAX_SLIDE_M`` that gives the
+    evidence of a compliant slide but docks nowhere (``simulate.guarded_path``); the planner
+    predicts as without it, so its P_dock is of the executed event.
     ``observe`` (diagnostic tools, e.g. ``tools.bench.posterior``) is called with a
     ``CycleView`` after each plan, before the move; an exception it raises ends the episode
     as an error like any other.
@@ -166,12 +171,13 @@ def run_episode(
                 problem.load,
                 compliant,
                 problem.contact_resolution,
+                slide_on_slip=slide_on_slip and not compliant,
             )
             log.append(
                 CycleLog(**entry, docked=run.docked, contact=run.contact, stop_point=run.stop_point)
             )
             evidence = run.observations
-            if compliant and not run.docked:
+            if run.separated:
                 evidence = slide_evidence(
                     ground_truth,
                     problem.prior.closed,
@@ -199,8 +205,9 @@ def slide_evidence(
     """``run.observations`` plus what the compliant slide after the first contact showed.
 
     ``simulate.guarded_path`` records the first loading contact only (its stick/slip status).
-    Under compliance a slipping tool then slides along the surface up to the vertex where it
-    separates (Sec. V-A2), pushing along ``load`` and slipping all the way. The robot knows its
+    Under compliance (or ``slide_on_slip``, within ``max_slide``) a slipping tool then slides
+    along the surface up to the vertex where it separates (Sec. V-A2, ``run.separated``),
+    pushing along ``load`` and slipping all the way. The robot knows its
     trace, a polyline whose corners are where its direction changed; each straight piece
     between two corners (a surface edge crossed completely) gives slip observations every 4 cm
     (``slides.crossed_piece_evidence``). Without this the posterior only learns that the first
@@ -216,7 +223,7 @@ def slide_evidence(
     if feature.kind != "vertex":
         return obs
     v = np.asarray(ground_truth, float)
-    edges, left, right = simulate.edge_index_arrays(len(v), closed)
+    edges, _, _ = simulate.edge_index_arrays(len(v), closed)
     contact = 0.5 * (obs.a[-1] + obs.b[-1])
     push = geometry2d.unit(load, "load")
     half = 0.5 * contact_resolution * push
@@ -226,15 +233,8 @@ def slide_evidence(
     if not hit[0]:
         return obs
     going_left = status == Status.SLIP_LEFT
-    trace = [int(edges[edge[0], 0] if going_left else edges[edge[0], 1])]
-    for _ in range(len(v)):  # the slide visits each vertex at most once
-        if trace[-1] == feature.index:
-            break
-        nxt = int(left[trace[-1]] if going_left else right[trace[-1]])
-        if nxt < 0:
-            break
-        trace.append(int(edges[nxt, 0] if going_left else edges[nxt, 1]))
-    crossed = np.array(trace)  # edges crossed completely: between consecutive trace vertices
+    # edges crossed completely: between consecutive trace vertices
+    crossed = simulate.slide_trace(len(v), closed, int(edge[0]), going_left, feature.index)
     pieces = slides.crossed_piece_evidence(
         v[crossed[:-1]], v[crossed[1:]], push, contact_resolution, status
     )

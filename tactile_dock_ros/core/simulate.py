@@ -19,6 +19,11 @@ The motion model of paper Sec. III-A2 and V-A, shared with the probabilistic sim
   ends the move undocked; the tool does not fly on to a later contact.
 * The remaining length of the loading move does not limit the slide: once in contact the robot
   keeps pushing with the load until it sticks or separates.
+* Non-compliant with ``slide_on_slip`` (``guarded_path``): a slip at the first contact does not
+  end the move at once; the tool keeps the load and slides as a compliant one would, for at
+  most ``max_slide`` metres from the first contact, only to see the face (``Execution.separated``
+  gives ``core.explore`` the slide's evidence). It docks only where it stuck at first contact,
+  the non-compliant rule, so the planner's non-compliant prediction stays the right one.
 
 Edge functionals (linear in an edge's direction vector t = d - c, also used by ``probsim``):
 ``friction_functionals(load, mu)`` gives rows wL, wR, wN with reaction r = -load:
@@ -40,6 +45,9 @@ from .history import History, Status
 
 # Outcome codes of the batched simulation.
 STUCK_EDGE, STUCK_VERTEX, SEPARATED, SLID, NO_CONTACT, COLLIDED = range(6)
+# m: the longest slide after a slip, from the first contact (the executor's ``max_slide``,
+# execution.guarded.Settings and config/mock.yaml)
+MAX_SLIDE_M = 0.3
 
 
 class Feature(NamedTuple):
@@ -58,6 +66,10 @@ class Execution:
     stop_point: np.ndarray  # (2,) metres
     stop_feature: Feature | None  # where the tool stopped; None without contact
     observations: History
+    # the loading contact slipped and the slide ended by separating at stop_feature's vertex
+    # (compliant, or non-compliant with slide_on_slip within max_slide): ``explore`` adds the
+    # slide's evidence (``explore.slide_evidence``)
+    separated: bool = False
 
 
 def friction_functionals(load, friction: float) -> np.ndarray:
@@ -198,6 +210,22 @@ def _run(vertices, closed, path, friction, load, compliant):
     return outcome, segment, edge, s_hit, vertex, status
 
 
+def slide_trace(n: int, closed: bool, edge: int, going_left: bool, end: int) -> np.ndarray:
+    """Vertex indices a slide from first-contact ``edge`` visits, toward its first vertex c
+    (``going_left``) or its last d, up to vertex ``end`` (included) or the polyline's end; each
+    vertex at most once."""
+    edges, left, right = edge_index_arrays(n, closed)
+    trace = [int(edges[edge, 0] if going_left else edges[edge, 1])]
+    for _ in range(n):
+        if trace[-1] == end:
+            break
+        nxt = int(left[trace[-1]] if going_left else right[trace[-1]])
+        if nxt < 0:
+            break
+        trace.append(int(edges[nxt, 0] if going_left else edges[nxt, 1]))
+    return np.array(trace)
+
+
 def guarded_path(
     vertices,
     closed: bool,
@@ -206,6 +234,9 @@ def guarded_path(
     load,
     compliant: bool = True,
     contact_resolution: float = 0.005,
+    *,
+    slide_on_slip: bool = False,
+    max_slide: float = MAX_SLIDE_M,
 ) -> Execution:
     """Execute ``path`` (L, 2) on the known polyline ``vertices`` (n, 2); see the module doc.
 
@@ -215,6 +246,22 @@ def guarded_path(
     along the move, with status COLLIDE (a move before the last) or STICK / SLIP_LEFT /
     SLIP_RIGHT (the loading move; the status of the first contact, even if a compliant slide then
     sticks at a vertex). The stop point is the contact point, or the vertex where a slide ended.
+
+    ``slide_on_slip`` (non-compliant only; the executor's ``slide_on_slip``): after a slip at
+    the first contact the tool slides on as a compliant one (``slide_outcomes``) while every
+    vertex it reaches lies within ``max_slide`` metres of the contact point (the executor
+    measures its slide from there, ``execution.guarded``). Decision: it does not dock, not
+    even when the slide stops at a vertex trap: a non-compliant plan docks only where its
+    first contact sticks, the event the planner's non-compliant prediction (``probsim``,
+    ``dock_outcomes``) is of, so predicted and executed docking stay the same event. A slide
+    that separates within ``max_slide`` stops at that vertex with ``separated`` set (its
+    evidence, ``explore.slide_evidence``); one stopped by a trap ends at the trap's vertex,
+    one longer than ``max_slide`` at the contact point, both with only the first contact as
+    evidence (the executor cannot tell a trap from the arm's spring holding it on a slope,
+    and ``slides.consistent_with_slides`` reads a slide's rows as one that separated). Not
+    modelled: the arm's lateral spring, which can stall a long slide on a slope just steeper
+    than the friction cone (the executor then reports the first contact only). Measured
+    effect: ``execution.guarded``'s module doc.
     """
     v = _validate_vertices(vertices, closed)
     if v.ndim != 2:
@@ -245,12 +292,30 @@ def guarded_path(
     ends.append(point + half)
     codes = [Status.FREE] * (len(starts) - 1) + [int(status)]
     obs = History(np.array(starts), np.array(ends), np.array(codes))
+    if outcome == SLID and slide_on_slip:
+        outcome, vertex = _bounded_slide(v, closed, point, edge, load, friction, max_slide)
+    docked = bool(outcome in (STUCK_EDGE, STUCK_VERTEX)) and (compliant or outcome == STUCK_EDGE)
     if outcome in (STUCK_VERTEX, SEPARATED):
         stop, feature = v[vertex].copy(), Feature("vertex", int(vertex))
     else:
         stop, feature = point, Feature("edge", int(edge))
-    docked = bool(outcome in (STUCK_EDGE, STUCK_VERTEX))
-    return Execution(docked, True, stop, feature, obs)
+    return Execution(docked, True, stop, feature, obs, bool(outcome == SEPARATED))
+
+
+def _bounded_slide(v, closed, point, edge, load, friction, max_slide):
+    """(outcome, vertex) of a non-compliant slide on (n, 2) ``v`` from the slip at ``point`` on
+    ``edge`` (``guarded_path``'s ``slide_on_slip``): STUCK_VERTEX or SEPARATED at the vertex
+    where the compliant slide ends when every vertex on the way lies within ``max_slide`` of
+    ``point``, else SLID (cut short) with vertex -1."""
+    if not (np.isfinite(max_slide) and max_slide >= 0):
+        raise ValueError(f"max_slide must be finite and >= 0, got {max_slide}")
+    outcome, vertex, status = (
+        x[0] for x in slide_outcomes(v[None], closed, np.array([edge]), load, friction, True)
+    )
+    trace = slide_trace(len(v), closed, int(edge), status == Status.SLIP_LEFT, int(vertex))
+    if np.max(np.linalg.norm(v[trace] - point, axis=1)) > max_slide:
+        return SLID, -1
+    return int(outcome), int(vertex)
 
 
 def dock_outcomes(samples, closed: bool, path, friction: float, load, compliant: bool = True):

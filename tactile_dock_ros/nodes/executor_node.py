@@ -140,6 +140,7 @@ CONFIG_PARAMS = [
         1e-3,
         1.0,
     ),
+    _tuning("slide_on_slip", "non-compliant plans: slide on after a slip, evidence only"),
     _tuning(
         "released_fraction",
         "after the retreat the tool moves along the force until it is below this fraction of "
@@ -232,6 +233,7 @@ class ExecutorNode(LifecycleNode):
             settle_time=p.settle_time,
             max_slide=p.max_slide,
             evidence_spacing=p.evidence_spacing,
+            slide_on_slip=p.slide_on_slip,
             released_fraction=p.released_fraction,
             approach_gain=p.approach_gain,
         )

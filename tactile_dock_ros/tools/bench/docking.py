@@ -11,7 +11,9 @@ the split). Every truth runs one episode per strategy, per prior and per mode:
   262.5 px) from a pose displaced by a calibration error drawn per truth from the configured
   extrinsic covariance (seeded), then perceived (``perception.mock_camera.depth_prior``);
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
-  (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml).
+  (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml; with its
+  executor's ``slide_on_slip``, ``--slide-on-slip``, a slip slides on for evidence only,
+  ``simulate.guarded_path``; ``--no-slide-on-slip`` gives the non-compliant rows of before).
 
 Each truth record carries, per mode, ``feasible`` (``simulate.feasible``: some straight loading
 move docks) and ``holding_margin_deg`` (``simulate.holding_margin``: degrees by which its best
@@ -81,6 +83,12 @@ def mock_give_up_threshold() -> float:
     return float(profile["planner"]["ros__parameters"]["give_up_threshold"])
 
 
+def mock_slide_on_slip() -> bool:
+    """The mock profile's executor ``slide_on_slip`` (``config/mock.yaml``; absent: False)."""
+    profile = yaml.safe_load(MOCK_PROFILE.read_text())
+    return bool(profile["executor"]["ros__parameters"].get("slide_on_slip", False))
+
+
 def _probability(text: str) -> float:
     value = float(text)
     if not 0.0 < value < 1.0:
@@ -116,6 +124,18 @@ def add_episode_arguments(parser) -> None:
     )
 
 
+def add_slide_argument(parser) -> None:
+    """``--slide-on-slip``, for the suites that run episodes (this one, ``bench posterior``)."""
+    parser.add_argument(
+        "--slide-on-slip",
+        action=argparse.BooleanOptionalAction,
+        default=mock_slide_on_slip(),
+        help="non-compliant mode: a slip at the first contact goes on as a slide of at most "
+        "simulate.MAX_SLIDE_M that is evidence along the face but never docks (default: the "
+        "mock profile executor's slide_on_slip)",
+    )
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--instances", type=_at_least(1), default=20, help="truths per problem")
     parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
@@ -139,6 +159,7 @@ def add_arguments(parser) -> None:
         help="compliant: ideal compliance; non-compliant: the mock profile's",
     )
     add_episode_arguments(parser)
+    add_slide_argument(parser)
     parser.add_argument(
         "--episode-seeds",
         type=_at_least(1),
@@ -173,6 +194,7 @@ class _Task:
     max_cycles: int
     samples: int
     give_up_threshold: float
+    slide_on_slip: bool = False
 
 
 @functools.cache
@@ -210,6 +232,7 @@ def _episode(task: _Task) -> dict:
         n_samples=task.samples,
         give_up_threshold=task.give_up_threshold,
         compliant=task.mode == "compliant",
+        slide_on_slip=task.slide_on_slip,
         prior=task.prior,
     )
     return {
@@ -604,6 +627,7 @@ def run(args) -> dict:
             max_cycles,
             args.samples,
             args.give_up_threshold,
+            args.slide_on_slip,
         )
         for i in range(instances)
         for repeat in range(args.episode_seeds)
@@ -647,6 +671,7 @@ def run(args) -> dict:
         "max_cycles": max_cycles,
         "samples": args.samples,
         "give_up_threshold": args.give_up_threshold,
+        "slide_on_slip": args.slide_on_slip,
         "episode_seeds": args.episode_seeds,
         "workers": args.workers,
         "unfinished_episodes": sum(r is None for r in records),

@@ -44,6 +44,7 @@ from tactile_dock_ros.tools.bench.docking import (
     _problem,
     _truths,
     add_episode_arguments,
+    add_slide_argument,
     episode_seed,
 )
 
@@ -105,6 +106,7 @@ def add_arguments(parser) -> None:
         help="--sampler-runs from the previous cycle's samples (as the loop) or the seeding",
     )
     add_episode_arguments(parser)
+    add_slide_argument(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
 
 
@@ -340,6 +342,7 @@ def run(args) -> dict:
         n_samples=args.samples,
         give_up_threshold=args.give_up_threshold,
         compliant=args.mode == "compliant",
+        slide_on_slip=args.slide_on_slip,
         prior=shape,
         observe=views.append,
     )
