@@ -70,14 +70,27 @@ def test_the_planner_plans_with_its_parameters(profile, tmp_path):
     with node_from_launch(launch_nodes(profile)["planner"], tmp_path) as (node, _):
         names = ("load_direction", "contact_resolution", "give_up_threshold", "compliant")
         value = {name: node.get_parameter(name).value for name in names}
+        box = [node.get_parameter(f"workspace_{end}").value for end in ("min", "max")]
         config = node.config
     expected = PlannerConfig(
         tuple(value["load_direction"]),
         value["contact_resolution"],
         value["give_up_threshold"],
         compliant=value["compliant"],
+        workspace=tuple(map(tuple, box)),
     )
     assert config == expected
+
+
+@pytest.mark.parametrize("profile", ["mock", "robot"])
+def test_the_planner_plans_in_the_executors_workspace_box(profile):
+    """A path the executor would refuse as outside its box is never planned: the profiles give
+    the planner (and perception, for /evaluate_hold) the executor's box."""
+    config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
+    for end in ("workspace_min", "workspace_max"):
+        box = config["executor"]["ros__parameters"][end]
+        assert config["planner"]["ros__parameters"][end] == box, end
+        assert config["perception"]["ros__parameters"][end] == box, end
 
 
 def test_an_unknown_problem_stops_mock_hardware(tmp_path):

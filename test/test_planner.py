@@ -298,3 +298,30 @@ def test_a_tool_whose_latest_evidence_was_dropped_leaves_the_way_it_came():
     unknown = EpisodeState(history=history, move_ids=[0, 0], dropped=[1], tool=tool)
     unknown_plan = planner.plan(samples, problem.prior, unknown, config)  # no move to go back on
     np.testing.assert_allclose(unknown_plan.path, plans[0].path)
+
+
+@pytest.mark.parametrize("name", problems.names())
+def test_no_path_leaves_the_workspace_box(name):
+    problem, _, free = _prior_plan(name)
+    lo, hi = free.path.min(axis=0), free.path.max(axis=0)
+    _, _, same = _prior_plan(name, workspace=(lo, hi))  # a box around the free plan's path
+    assert same.decision == "dock" and np.array_equal(same.path, free.path)
+    end = free.path[-1]  # a box without the free plan's end: another path inside, or a give-up
+    box = (lo - 1.0, np.array([hi[0] + 1.0, hi[1] + 1.0]))
+    box[0][1] = end[1] + 1e-6
+    _, _, boxed = _prior_plan(name, workspace=box)
+    if boxed.decision == "dock":
+        assert np.all(boxed.path >= box[0]) and np.all(boxed.path <= box[1])
+    else:
+        assert "leave the workspace box" in boxed.reason, boxed.reason
+    start = np.asarray(problem.start)  # a box around the start only: nothing to plan
+    _, _, none = _prior_plan(name, workspace=(start - 1e-3, start + 1e-3))
+    assert none.decision == "give_up" and "leave the workspace box" in none.reason
+
+
+@pytest.mark.parametrize(
+    "box", [((0.0, 0.0), (0.0, 1.0)), ((0.0, 0.0), (1.0,)), ((np.nan, 0.0), (1.0, 1.0))]
+)
+def test_a_bad_workspace_box_is_refused(box):
+    with pytest.raises(ValueError, match="workspace"):
+        PlannerConfig(workspace=box)

@@ -133,6 +133,9 @@ class PlannerConfig:
             on after a slip (``slide_on_slip``, ``simulate.guarded_path``: evidence only), so
             the prediction needs no setting of its own.
         max_path_attempts: at most this many candidate sites are path-planned, >= 1.
+        workspace: ``((x_min, y_min), (x_max, y_max))`` in the plane, metres: the executor's
+            box (its ``workspace_min/max``). A path with a waypoint outside is not planned (the
+            executor would refuse the plan and end the episode ABORTED); None: no box.
     """
 
     load: tuple[float, float] = (0.0, -1.0)
@@ -141,6 +144,7 @@ class PlannerConfig:
     objective: str = "ours"
     compliant: bool = True
     max_path_attempts: int = 20
+    workspace: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def __post_init__(self) -> None:
         load = np.asarray(self.load, float).reshape(-1)
@@ -161,3 +165,20 @@ class PlannerConfig:
         attempts = self.max_path_attempts
         if isinstance(attempts, bool) or not isinstance(attempts, int | np.integer) or attempts < 1:
             raise ValueError(f"max_path_attempts must be >= 1, got {self.max_path_attempts}")
+        if self.workspace is not None:
+            try:
+                box = np.asarray(self.workspace, float)
+            except (TypeError, ValueError):
+                box = np.zeros(0)
+            if box.shape != (2, 2) or not np.all(np.isfinite(box)) or np.any(box[0] >= box[1]):
+                raise ValueError(
+                    f"workspace must be finite (min, max) corners, got {self.workspace}"
+                )
+            object.__setattr__(self, "workspace", tuple(map(tuple, box.tolist())))
+
+    def inside(self, points: np.ndarray) -> bool:
+        """Whether every point (K, 2) lies in ``workspace`` (borders included; True without)."""
+        if self.workspace is None:
+            return True
+        lo, hi = np.asarray(self.workspace)
+        return bool(np.all((points >= lo) & (points <= hi)))

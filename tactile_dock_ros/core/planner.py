@@ -386,6 +386,20 @@ def _check_inputs(samples: np.ndarray, shape: GaussianShape, state: EpisodeState
         raise ValueError("the tool position is unknown (EpisodeState.tool)")
 
 
+def _why_no_path(objective, order, unreachable, outside: int, threshold: float) -> str:
+    """The give-up reason when no candidate site got a plan (``plan``'s path loop)."""
+    if not order:
+        return f"no candidate site scores above 0 under {objective!r}"
+    if unreachable:
+        return (
+            f"best docking probability of a whole path {max(unreachable):.2e} < threshold "
+            f"{threshold:g} ({len(unreachable)} sites' paths)"
+        )
+    return (
+        f"{outside} sites' paths leave the workspace box, no other path" if outside else NO_PREFIX
+    )
+
+
 def plan(
     samples: np.ndarray, shape: GaussianShape, state: EpisodeState, config: PlannerConfig
 ) -> Plan:
@@ -449,6 +463,7 @@ def plan(
     )
     order = [j for j in np.argsort(-values, kind="stable") if values[j] > 0]
     unreachable = []  # whole-path P_dock of sites whose way there likely touches something
+    outside = 0  # sites whose path leaves the executor's workspace box
     for j in order[: config.max_path_attempts]:
         tail = candidates.start[j : j + 1]
         if candidates.needs_exit[j]:
@@ -462,6 +477,9 @@ def plan(
         path = np.vstack([lead[:-1], middle, tail[1:], candidates.end[j]])
         path = path[np.r_[True, np.any(np.diff(path, axis=0) != 0, axis=1)]]
         if space.touches_outline(path[len(lead) - 1 : -1]):  # the lead is known or made free
+            continue
+        if not config.inside(path):
+            outside += 1
             continue
         p_dock = whole_path_p_dock(posterior, samples, path, load, compliant, holding)
         if objective != "info_gain" and p_dock < config.give_up_threshold:
@@ -479,15 +497,5 @@ def plan(
             candidates,
             rejected,
         )
-    if not order:
-        return _give_up(
-            rejected, f"no candidate site scores above 0 under {objective!r}", candidates
-        )
-    if unreachable:
-        return _give_up(
-            rejected,
-            f"best docking probability of a whole path {max(unreachable):.2e} < threshold "
-            f"{config.give_up_threshold:g} ({len(unreachable)} sites' paths)",
-            candidates,
-        )
-    return _give_up(rejected, NO_PREFIX, candidates)
+    why = _why_no_path(objective, order, unreachable, outside, config.give_up_threshold)
+    return _give_up(rejected, why, candidates)

@@ -23,9 +23,9 @@ would plan on it (``core.holds.evaluate_hold``: ``evaluate_samples`` prior draws
 ``found: false`` with a reason.
 
 Decision: this node serves ``/evaluate_hold`` because it owns the holds; the planner's settings
-it needs are four read-only parameters declared here from the planner's own table
-(``planner_node.PARAMS``, mapped by ``planner_node.planner_config``, same defaults; both
-profiles leave them at those, test_holds checks the two configs agree). The planner would need
+it needs are read-only parameters declared here from the planner's own table
+(``planner_node.CONFIG_SETTINGS`` of ``planner_node.PARAMS``, same defaults; the profiles give
+both nodes the same workspace box, test_holds checks the two configs agree). The planner would need
 every prior sent to it (a new topic or a service call per request) and would block its episode
 loop, whose plan resends are the executor's heartbeat, for ~10-100 ms per hold; this node is idle
 between captures.
@@ -64,7 +64,6 @@ from tactile_dock_ros.perception.terrain_prior import perceive
 from tactile_dock_ros.srv import EvaluateHold
 
 # the planner's settings of core.planner.plan, for /evaluate_hold (the module docstring)
-PLANNER_SETTINGS = ("load_direction", "give_up_threshold", "contact_resolution", "compliant")
 PARAMS = [
     *PLANE_TABLE,  # the prior's plane comes from perception_config; the tool pose's from these
     Param("prior_source", "depth", "where the prior comes from", choices=("depth", "problem")),
@@ -90,7 +89,7 @@ PARAMS = [
     MAX_HOLDS,
     Param("evaluate_samples", 100, "prior draws per /evaluate_hold evaluation", "", 2, 100000),
     Param("evaluate_seed", 0, "seed of each /evaluate_hold evaluation's draws", "", 0, 2**31 - 1),
-    *(p for p in planner_node.PARAMS if p.name in PLANNER_SETTINGS),
+    *(p for p in planner_node.PARAMS if p.name in planner_node.CONFIG_SETTINGS),
 ]
 
 

@@ -102,6 +102,14 @@ PARAMS = [
     Param("contact_force_threshold", 3.0, "guarded-move stop force", "N", 0.01, 500.0),
     Param("max_speed", 0.1, "tool speed along the path", "m/s", 1e-4, 1.0),
     Param("compliant", False, "plan with the compliant motion model"),
+    Param(
+        "workspace_min",
+        [-1.0, -1.0],
+        "executor's box, lower corner: no path leaves it",
+        "m",
+        length=2,
+    ),
+    Param("workspace_max", [1.0, 1.0], "executor's box, upper corner (plane x, y)", "m", length=2),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
     Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
     MAX_HOLDS,
@@ -118,6 +126,11 @@ PARAMS = [
 
 
 GOAL_OVERRIDES = ("max_cycles", "give_up_threshold", "compliant")  # Dock goal fields
+# the parameters planner_config maps (perception and tools.replay declare and read the same)
+CONFIG_SETTINGS = (
+    "load_direction", "give_up_threshold", "contact_resolution", "compliant", "workspace_min",
+    "workspace_max",
+)  # fmt: skip
 
 
 def planner_config(p) -> PlannerConfig:
@@ -131,6 +144,7 @@ def planner_config(p) -> PlannerConfig:
         contact_resolution=p.contact_resolution,
         give_up_threshold=p.give_up_threshold,
         compliant=p.compliant,
+        workspace=(tuple(p.workspace_min), tuple(p.workspace_max)),
     )
 
 

@@ -222,11 +222,10 @@ def settings_from(args: argparse.Namespace) -> Settings:
     """Planner parameters: node defaults < ``--config`` file < command-line overrides (of
     ``give_up_threshold``, ``contact_resolution``); the load and motion model come from each
     recorded plan in ``replan`` (the motion model unless ``--compliant`` is given)."""
-    from ..nodes.planner_node import PARAMS, planner_config
+    from ..nodes.planner_node import CONFIG_SETTINGS, PARAMS, planner_config
 
     table = {p.name: p for p in PARAMS}
-    names = ("load_direction", "give_up_threshold", "contact_resolution", "compliant")
-    values = {name: table[name].default for name in names}
+    values = {name: table[name].default for name in CONFIG_SETTINGS}
     if args.config is not None:
         path = package_files.resolve(args.config)  # FileNotFoundError names where it looked
         document = yaml.safe_load(path.read_text()) or {}
