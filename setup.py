@@ -3,8 +3,9 @@
 The ROS 2 package itself is built by CMakeLists.txt (colcon / ament_cmake): that build generates
 the messages and installs everything, nodes included. This file serves users who want the method
 (core, perception, execution) and its ROS-free tools (bench sampling / probsim / docking /
-perception, plot, calibrate) in a plain Python environment, e.g. for offline analysis. The ROS
-tools in the same folder (demo, episode, bag, replay, bench episode) need a ROS 2 environment.
+perception, plot, calibrate, fit_surface_prior) in a plain Python environment, e.g. for offline
+analysis. The ROS tools in the same folder (demo, episode, bag, replay, bench episode) need a
+ROS 2 environment.
 """
 
 from setuptools import setup

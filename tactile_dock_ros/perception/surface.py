@@ -105,6 +105,28 @@ def run_normals(vertices: np.ndarray, hidden: np.ndarray) -> np.ndarray:
     return normals
 
 
+def normal_noise(
+    vertices: np.ndarray,
+    rays: np.ndarray,
+    sigma: np.ndarray,
+    spacing_m: float,
+    jump_ends: tuple[bool, bool] = (False, False),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normals (r, 2), measurement variance along them (r,) and measured second differences
+    along them (r - 2,) of one visible run (step 1; ``surface_fit`` fits step 2 on these).
+
+    The variance is the ray std's normal component (incidence floored) with the half-spacing
+    std of a run end at a depth jump (``jump_ends``); the sagitta floor, which depends on the
+    excess over the corner threshold, is added by ``smooth_run``.
+    """
+    normals = core_prior.vertex_normals(vertices)
+    incidence = np.maximum(np.abs(np.sum(rays * normals, axis=1)), _MIN_INCIDENCE)
+    s2 = np.maximum(sigma * incidence, _MIN_SIGMA_M) ** 2
+    s2[[0, -1]] += np.where(np.asarray(jump_ends, bool), (spacing_m / 2) ** 2, 0.0)
+    second = vertices[:-2] - 2 * vertices[1:-1] + vertices[2:]
+    return normals, s2, np.sum(second * normals[1:-1], axis=1)
+
+
 def smooth_run(
     vertices: np.ndarray,
     rays: np.ndarray,
@@ -118,15 +140,10 @@ def smooth_run(
     ``jump_ends``: whether the first / last vertex borders a hidden stretch (a depth jump).
     """
     r = len(vertices)
-    normals = core_prior.vertex_normals(vertices)
-    incidence = np.maximum(np.abs(np.sum(rays * normals, axis=1)), _MIN_INCIDENCE)
-    s2 = np.maximum(sigma * incidence, _MIN_SIGMA_M) ** 2
+    normals, s2, c = normal_noise(vertices, rays, sigma, spacing_m, jump_ends)
     jump = np.asarray(jump_ends, bool)
-    s2[[0, -1]] += np.where(jump, (spacing_m / 2) ** 2, 0.0)
     shift = np.zeros(r)
     if r >= 3:
-        second = vertices[:-2] - 2 * vertices[1:-1] + vertices[2:]
-        c = np.sum(second * normals[1:-1], axis=1)
         sd_c = np.sqrt(s2[:-2] + 4 * s2[1:-1] + s2[2:])
         excess = np.maximum(np.abs(c) - surface.corner_threshold * sd_c, 0.0)
         s2[1:-1] += (excess / 4) ** 2
@@ -150,6 +167,17 @@ def smooth_run(
     return mean, core_prior.vertex_normals(mean)[:, :, None] * amplitudes[:, None, :]
 
 
+def run_inputs(terrain: TerrainSlice):
+    """Per visible run of the slice: (first, stop, unit rays from the camera (r, 2), whether its
+    first / last vertex borders a hidden stretch), as ``smooth_run`` takes them."""
+    rel = terrain.vertices - terrain.camera_xy
+    rays = rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
+    jump = np.zeros(len(rel), bool)
+    jump[terrain.stretches.ravel()] = True
+    for lo, hi in visible_runs(terrain.hidden):
+        yield lo, hi, rays[lo:hi], (bool(jump[lo]), bool(jump[hi - 1]))
+
+
 def surface_columns(
     terrain: TerrainSlice,
     extrinsic: Extrinsic,
@@ -164,19 +192,10 @@ def surface_columns(
         cols = core_prior.ray_columns(verts, terrain.camera_xy, sigma).reshape(n, 2, -1)
         cols = cols[:, :, ~terrain.hidden]
     else:
-        rel = verts - terrain.camera_xy
-        rays = rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
-        jump = np.zeros(n, bool)
-        jump[terrain.stretches.ravel()] = True
         blocks = []
-        for lo, hi in visible_runs(terrain.hidden):
+        for lo, hi, rays, jump_ends in run_inputs(terrain):
             verts[lo:hi], run_cols = smooth_run(
-                verts[lo:hi],
-                rays[lo:hi],
-                sigma[lo:hi],
-                terrain.spacing_m,
-                surface,
-                (jump[lo], jump[hi - 1]),
+                verts[lo:hi], rays, sigma[lo:hi], terrain.spacing_m, surface, jump_ends
             )
             block = np.zeros((n, 2, run_cols.shape[2]))
             block[lo:hi] = run_cols
