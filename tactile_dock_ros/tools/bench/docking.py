@@ -10,6 +10,11 @@ the split). Every truth runs one episode per strategy, per prior and per mode:
   truth rendered by the mock profile's depth camera (``--perception-config``, 320x240, focal
   262.5 px) from a pose displaced by a calibration error drawn per truth from the configured
   extrinsic covariance (seeded), then perceived (``perception.mock_camera.depth_prior``);
+  ``learned`` (not run unless asked): the SAME depth image (same seeds, same draws) conditioned
+  on the terrain class library ``--terrain-classes`` (default: the shipped
+  config/terrain_classes.npz, fitted on train truths by ``tools.fit_terrain_classes``) by
+  ``perception.learned_prior.condition``; the truth records carry the chosen class, every
+  class's log-evidence and the inlier fraction, the JSON the library path;
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
   (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml; with its
   executor's ``slide_on_slip``, ``--slide-on-slip``, a slip slides on for evidence only,
@@ -65,12 +70,15 @@ import yaml
 from ...core import explore, problems, simulate
 from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
-from ...perception.mock_camera import depth_prior
+from ...perception.learned_prior import TerrainLibrary, condition
+from ...perception.mock_camera import MockCamera, depth_prior, draw_calibration_error
 from .. import package_files
 from . import calibration
 from .splits import add_split_argument, split_seed
 
-PRIORS = ("problem", "depth")
+PRIORS = ("problem", "depth")  # the default, and the priors of ``bench posterior``
+DOCKING_PRIORS = (*PRIORS, "learned")  # learned: only when asked
+TERRAIN_CLASSES = Path("config/terrain_classes.npz")
 CLEARLY_INFEASIBLE_DEG = 1.0  # holding margin from which an infeasible truth is clearly so
 MODES = ("compliant", "non-compliant")
 PERCEPTION_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception_mock.yaml"
@@ -148,8 +156,16 @@ def add_arguments(parser) -> None:
         "--prior",
         nargs="+",
         default=list(PRIORS),
-        choices=PRIORS,
-        help="problem: the hand-made prior; depth: perceived from the mock camera",
+        choices=DOCKING_PRIORS,
+        help="problem: the hand-made prior; depth: perceived from the mock camera; learned: the "
+        "same image conditioned on the terrain class library (--terrain-classes)",
+    )
+    parser.add_argument(
+        "--terrain-classes",
+        type=Path,
+        default=TERRAIN_CLASSES,
+        help="terrain class library of the learned prior (tools.fit_terrain_classes; default: "
+        "the shipped one; a relative path missing here is taken from the package share)",
     )
     parser.add_argument(
         "--mode",
@@ -263,11 +279,35 @@ def _holding_margin(problem: problems.Problem, truth: np.ndarray, mode: str) -> 
     return float(margin) if np.isfinite(margin) else None
 
 
+def learned_prior(
+    truth: np.ndarray,
+    config: PerceptionConfig,
+    rng: np.random.Generator,
+    library: TerrainLibrary,
+    camera: MockCamera | None = None,
+):
+    """``(LearnedPrior, calibration error)``: the image ``depth_prior`` renders of ``truth``
+    with the same ``rng`` (the same draws in the same order: calibration error, then depth
+    noise), conditioned on ``library``. Raises ``PerceptionError`` like ``depth_prior``."""
+    camera = MockCamera() if camera is None else camera
+    error = draw_calibration_error(config.extrinsic, rng)
+    depth = camera.render(truth, config, error, rng)
+    return condition(library, depth, camera.K, config), error
+
+
 def _truths(
-    args, name: str, instances: int, config: PerceptionConfig | None, split: str = "train"
+    args,
+    name: str,
+    instances: int,
+    config: PerceptionConfig | None,
+    split: str = "train",
+    library: TerrainLibrary | None = None,
+    learned_config: PerceptionConfig | None = None,
 ) -> list[dict]:
     """Per instance: truth, feasibility and holding margin per mode and, when asked, its depth
-    prior; drawn from ``split``'s seeds (``splits.split_seed``; train: ``[seed, problem, i]``)."""
+    prior (``config``) and its learned prior (``library`` with ``learned_config``: the image the
+    depth prior sees with that config); drawn from ``split``'s seeds (``splits.split_seed``;
+    train: ``[seed, problem, i]``)."""
     p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
     base = split_seed(split, args.seed)
     problem = _problem(name)
@@ -290,13 +330,34 @@ def _truths(
                 entry["calibration_error"] = seen.calibration_error.tolist()
             except PerceptionError as err:
                 entry["depth"], entry["perception_error"] = None, str(err)
+        if library is not None:
+            try:
+                rng = np.random.default_rng([*base, p_index, i, 2])
+                fit, error = learned_prior(truth, learned_config, rng, library)
+                entry["learned"] = fit.prior
+                entry.setdefault("calibration_error", error.tolist())
+                entry["learned_class"] = fit.name
+                entry["learned_log_evidence"] = fit.log_evidence
+                entry["learned_inlier_fraction"] = fit.inlier_fraction
+            except PerceptionError as err:
+                entry["learned"], entry["learned_perception_error"] = None, str(err)
         out.append(entry)
     return out
 
 
 def _truth_record(truth: dict) -> dict:
     """The JSON part of a ``_truths`` entry: feasibility, calibration error, prior size."""
-    keep = ("instance", "feasible", "holding_margin_deg", "calibration_error", "perception_error")
+    keep = (
+        "instance",
+        "feasible",
+        "holding_margin_deg",
+        "calibration_error",
+        "perception_error",
+        "learned_class",
+        "learned_log_evidence",
+        "learned_inlier_fraction",
+        "learned_perception_error",
+    )
     record = {k: v for k, v in truth.items() if k in keep}
     if truth.get("depth") is not None:
         record["depth_prior_vertices"] = truth["depth"].n_vertices
@@ -603,10 +664,20 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 def run(args) -> dict:
     instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
-    config = None
-    if "depth" in args.prior:
+    config, library, library_path = None, None, None
+    if "depth" in args.prior or "learned" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    truths = {name: _truths(args, name, instances, config, args.split) for name in args.problems}
+    if "learned" in args.prior:
+        try:
+            library_path = package_files.resolve(args.terrain_classes)
+            library = TerrainLibrary.load(library_path)
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"--terrain-classes: {err}") from err
+    depth_config = config if "depth" in args.prior else None
+    truths = {
+        name: _truths(args, name, instances, depth_config, args.split, library, config)
+        for name in args.problems
+    }
     keys = [
         (name, source, mode, strategy)
         for name in args.problems
@@ -620,7 +691,7 @@ def run(args) -> dict:
             *key,
             i,
             truths[key[0]][i]["truth"],
-            _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i]["depth"],
+            _problem(key[0]).prior if key[1] == "problem" else truths[key[0]][i][key[1]],
             truths[key[0]][i]["feasible"][key[2]],
             truths[key[0]][i]["holding_margin_deg"][key[2]],
             episode_seed(truths[key[0]][i]["seed"], repeat),
@@ -676,6 +747,7 @@ def run(args) -> dict:
         "workers": args.workers,
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
+        "terrain_classes": None if library_path is None else str(library_path.resolve()),
         "note": "wall times per process, from a shared 2-core machine "
         f"running {args.workers} episode process(es)",
         "truths": {name: [_truth_record(t) for t in entries] for name, entries in truths.items()},

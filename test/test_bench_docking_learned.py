@@ -1,0 +1,52 @@
+"""``bench docking --prior learned``: the depth prior's image, conditioned on the terrain class
+library (``perception.learned_prior``)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.perception.learned_prior import TerrainLibrary
+from tactile_dock_ros.perception.mock_camera import depth_prior
+from tactile_dock_ros.tools import bench
+from tactile_dock_ros.tools.bench import docking
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "config" / "terrain_classes.npz"
+CONFIG = REPO / "config" / "perception_mock.yaml"
+
+
+def test_the_learned_prior_sees_the_depth_priors_image():
+    """Same seed: the same calibration error is drawn (then the same depth noise)."""
+    config = PerceptionConfig.load(CONFIG)
+    truth = problems.get("notch").sample_ground_truth(np.random.default_rng(1))
+    seen = depth_prior(truth, config, np.random.default_rng(7))
+    _, error = docking.learned_prior(
+        truth, config, np.random.default_rng(7), TerrainLibrary.load(SHIPPED)
+    )
+    assert np.array_equal(error, seen.calibration_error)
+
+
+def test_bench_docking_quick_with_the_learned_prior(tmp_path):
+    out = tmp_path / "learned.json"
+    argv = ["docking", "--quick", "--prior", "learned", "--strategies", "ours"]
+    assert bench.main([*argv, "--problems", "sloper", "notch", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert Path(report["terrain_classes"]).resolve() == SHIPPED.resolve()
+    assert {r["prior"] for r in report["results"]} == {"learned"}
+    assert all(r["errors"] == 0 for r in report["results"])
+    calibration = {(r["prior"], r["mode"]) for r in report["attempt_calibration"]}
+    assert calibration == {("learned", m) for m in docking.MODES}
+    for name, truths in report["truths"].items():
+        assert [t["learned_class"] for t in truths] == [name] * 3
+        assert all(len(t["calibration_error"]) == 6 for t in truths)
+
+
+def test_bench_docking_refuses_a_bad_library(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"garbage")
+    with pytest.raises(SystemExit, match=r"--terrain-classes: .*not a terrain class library"):
+        bench.main(["docking", "--quick", "--prior", "learned", "--terrain-classes", str(bad)])
