@@ -520,6 +520,14 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     samples = probe.rec.wrenches if stream == "wrench" else probe.rec.poses
     assert probe.drop(stream, True), f"drop_{stream} failed"
     report = probe.report(plan_id, timeout_s=10.0)
+    # the zero command goes out just before the report, on another topic: the probe may take
+    # the report first (latency None then, though the arm was stopped)
+    probe.spin_until(
+        lambda: (
+            stop_latency(samples, probe.rec.commands[n_commands:], 0.0)["latency_s"] is not None
+        ),
+        1.0,
+    )
     stop = stop_latency(samples, probe.rec.commands[n_commands:], env.sensor_timeout)
 
     def error() -> str:
