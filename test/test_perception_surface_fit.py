@@ -21,17 +21,22 @@ def _template(seed=0, runs=160):
     return out
 
 
+def _dense_noise(run) -> np.ndarray:
+    """(m, m) covariance of a run's m second differences from its vertex noise (dense)."""
+    m = len(run.c)
+    D2 = np.zeros((m, m + 2))
+    D2[np.arange(m), np.arange(m)] = 1.0
+    D2[np.arange(m), np.arange(m) + 1] = -2.0
+    D2[np.arange(m), np.arange(m) + 2] = 1.0
+    return (D2 * run.s2) @ D2.T
+
+
 def test_pairs_carry_the_band_of_the_second_differences_noise():
     runs = _template(runs=3)
     d = Differences.from_runs(runs)
     offset = 0
     for r in runs:
-        m = len(r.c)
-        D2 = np.zeros((m, m + 2))
-        D2[np.arange(m), np.arange(m)] = 1.0
-        D2[np.arange(m), np.arange(m) + 1] = -2.0
-        D2[np.arange(m), np.arange(m) + 2] = 1.0
-        B = (D2 * r.s2) @ D2.T
+        B = _dense_noise(r)
         kept = np.flatnonzero(r.keep)
         np.testing.assert_allclose(d.noise[offset : offset + len(kept)], np.diag(B)[kept])
         for a in range(len(kept)):
@@ -49,12 +54,7 @@ def test_smoother_evidence_is_the_dense_gaussian_density():
     runs = surface_fit.sample_runs(_template(runs=4), Mixture(0.05, 0.1, 0.5, 1.0), rng)
     expected = 0.0
     for r in runs:
-        m = len(r.c)
-        D2 = np.zeros((m, m + 2))
-        D2[np.arange(m), np.arange(m)] = 1.0
-        D2[np.arange(m), np.arange(m) + 1] = -2.0
-        D2[np.arange(m), np.arange(m) + 2] = 1.0
-        B = ((D2 * r.s2) @ D2.T)[np.ix_(r.keep, r.keep)]
+        B = _dense_noise(r)[np.ix_(r.keep, r.keep)]
         c = r.c[r.keep]
         q = surface_fit.smoother_turn_variance(c, np.diag(B), 0.02, 0.1, 2.0)
         cov = 0.81 * B + np.diag(q)
