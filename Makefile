@@ -24,6 +24,10 @@ PYTEST_ARGS ?=
 
 # Run-time environment: ament_index finds our share/ directory in the venv prefix.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
+# One OpenBLAS thread (as the launch file gives each node): the matrices are small, and a second
+# thread spin-waits while the node processes the tests start hold the other core (2026-11-28,
+# test_prior_select + test_learned_prior beside one busy process: 107 s with the default, 10 s).
+export OPENBLAS_NUM_THREADS ?= 1
 
 .PHONY: test test-slow test-perturbed colcon-test setup lint format clean distclean demo
 .DEFAULT_GOAL := test

@@ -30,12 +30,32 @@ def test_the_learned_prior_sees_the_depth_priors_image():
     assert np.array_equal(error, seen.calibration_error)
 
 
+def test_out_of_library_the_learned_row_gets_the_depth_rows_prior():
+    """A library without the truth's class: the gate falls back to exactly the depth prior."""
+    config = PerceptionConfig.load(CONFIG)
+    truth = problems.get("notch").sample_ground_truth(np.random.default_rng(1))
+    seen = depth_prior(truth, config, np.random.default_rng(7))
+    shipped = TerrainLibrary.load(SHIPPED)
+    others = TerrainLibrary(
+        tuple(c for c in shipped.classes if c.name != "notch"), shipped.min_inlier_fraction
+    )
+    chosen, _ = docking.learned_prior(truth, config, np.random.default_rng(7), others)
+    assert chosen.model == "generic"
+    assert np.array_equal(chosen.prior.mean, seen.prior.mean)
+    assert np.array_equal(chosen.prior.basis, seen.prior.basis)
+    chosen, _ = docking.learned_prior(truth, config, np.random.default_rng(7), shipped)
+    assert chosen.model == "learned" and chosen.class_name == "notch"
+
+
 def test_bench_docking_quick_with_the_learned_prior(tmp_path):
     out = tmp_path / "learned.json"
     argv = ["docking", "--quick", "--prior", "learned", "--strategies", "ours"]
     assert bench.main([*argv, "--problems", "sloper", "notch", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert Path(report["terrain_classes"]).resolve() == SHIPPED.resolve()
+    assert report["min_inlier_fraction"] == TerrainLibrary.load(SHIPPED).min_inlier_fraction
+    models = {n: [t["learned_model"] for t in ts] for n, ts in report["truths"].items()}
+    assert report["learned_fallbacks"] == {n: m.count("generic") for n, m in models.items()}
     assert {r["prior"] for r in report["results"]} == {"learned"}
     assert all(r["errors"] == 0 for r in report["results"])
     calibration = {(r["prior"], r["mode"]) for r in report["attempt_calibration"]}
@@ -50,3 +70,5 @@ def test_bench_docking_refuses_a_bad_library(tmp_path):
     bad.write_bytes(b"garbage")
     with pytest.raises(SystemExit, match=r"--terrain-classes: .*not a terrain class library"):
         bench.main(["docking", "--quick", "--prior", "learned", "--terrain-classes", str(bad)])
+    with pytest.raises(SystemExit, match=r"--min-inlier-fraction: .*\[0, 1\]"):
+        bench.main(["docking", "--quick", "--prior", "learned", "--min-inlier-fraction", "1.5"])

@@ -6,6 +6,7 @@ The processes are started from the mock launch file; the test plays the planner'
 import numpy as np
 import pytest
 import yaml
+from conftest import REPO_ROOT
 from geometry_msgs.msg import TwistStamped
 from ros_helpers import ros_node, spin_until
 from tactile_dock_ros.msg import DockingPlan, ExecutionReport, ShapeDistribution
@@ -13,6 +14,7 @@ from tactile_dock_ros.msg import DockingPlan, ExecutionReport, ShapeDistribution
 from tactile_dock_ros.core.history import Status
 from tactile_dock_ros.execution.types import PlanCommand
 from tactile_dock_ros.nodes import convert, qos
+from tactile_dock_ros.perception.learned_prior import TerrainLibrary
 from tactile_dock_ros.tools import bringup
 
 pytestmark = pytest.mark.dds
@@ -82,8 +84,9 @@ def test_executor_docks_on_the_mock_floor_and_respects_its_limits(floor_bringup)
     assert speeds and max(speeds) <= limits["max_speed"] + 1e-9
 
 
-def test_perception_builds_a_prior_from_the_mock_camera(tmp_path):
-    arguments = {"profile": "mock", "problem": "notch", "seed": "2"}
+@pytest.mark.parametrize("prior_source", ["depth", "learned"])
+def test_perception_builds_a_prior_from_the_mock_camera(tmp_path, prior_source):
+    arguments = {"profile": "mock", "problem": "notch", "seed": "2", "prior_source": prior_source}
     priors = []
     with (
         bringup.running(arguments, tmp_path, only={"perception", "mock_hardware"}),
@@ -94,3 +97,9 @@ def test_perception_builds_a_prior_from_the_mock_camera(tmp_path):
     assert priors, (tmp_path / "perception.log").read_text()[-2000:]
     prior = convert.shape_from_msg(priors[0])
     assert prior.n_vertices >= 10 and prior.n_basis > 0
+    learned = TerrainLibrary.load(REPO_ROOT / "config" / "terrain_classes.npz").get("notch")
+    log = (tmp_path / "perception.log").read_text()
+    if prior_source == "learned":  # the notch class's vertices, conditioned on the image
+        assert prior.n_vertices == learned.n_vertices and "learned prior: class notch" in log
+    else:
+        assert prior.n_vertices != learned.n_vertices and "learned" not in log

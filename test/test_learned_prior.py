@@ -53,18 +53,20 @@ def test_fit_class_rejects_bad_input(truths, kw):
         fit_class("bad", truths, **kw)
 
 
-def _library() -> TerrainLibrary:
+def _library(gate: float | None = 0.9) -> TerrainLibrary:
     a = TerrainClass("a", np.arange(6.0).reshape(3, 2), np.eye(6)[:, :2], False, 0.4)
     b = TerrainClass("b", np.ones((4, 2)), 0.1 * np.eye(8), True, 0.7)
-    return TerrainLibrary((a, b))
+    return TerrainLibrary((a, b), gate)
 
 
-def test_save_load_round_trip(tmp_path):
-    library = _library()
+@pytest.mark.parametrize("gate", [0.9, None])
+def test_save_load_round_trip(tmp_path, gate):
+    library = _library(gate)
     path = tmp_path / "lib.npz"
     library.save(path)
     loaded = TerrainLibrary.load(path)
     assert loaded.names == ["a", "b"]
+    assert loaded.min_inlier_fraction == gate
     for c, d in zip(library.classes, loaded.classes, strict=True):
         assert np.array_equal(c.mean, d.mean) and np.array_equal(c.basis, d.basis)
         assert (c.closed, c.friction) == (d.closed, d.friction)
@@ -81,9 +83,19 @@ def test_corrupted_or_wrong_version_files_are_refused(tmp_path):
     path = tmp_path / "lib.npz"
     _library().save(path)
     arrays = dict(np.load(path))
-    np.savez(tmp_path / "v2.npz", **{**arrays, "format_version": np.array(2)})
-    with pytest.raises(ValueError, match="format 2, this code reads 1"):
-        TerrainLibrary.load(tmp_path / "v2.npz")
+    np.savez(tmp_path / "v3.npz", **{**arrays, "format_version": np.array(3)})
+    with pytest.raises(ValueError, match="format 3, this code reads 1 and 2"):
+        TerrainLibrary.load(tmp_path / "v3.npz")
+    # format 1 (no gate) still loads, without a gate; format 2 without its gate does not
+    v1 = {k: v for k, v in arrays.items() if k != "min_inlier_fraction"}
+    np.savez(tmp_path / "v1.npz", **{**v1, "format_version": np.array(1)})
+    assert TerrainLibrary.load(tmp_path / "v1.npz").min_inlier_fraction is None
+    np.savez(tmp_path / "nogate.npz", **v1)
+    with pytest.raises(ValueError, match=r"malformed.*min_inlier_fraction"):
+        TerrainLibrary.load(tmp_path / "nogate.npz")
+    np.savez(tmp_path / "badgate.npz", **{**arrays, "min_inlier_fraction": np.array(1.5)})
+    with pytest.raises(ValueError, match="malformed"):
+        TerrainLibrary.load(tmp_path / "badgate.npz")
     np.savez(tmp_path / "nov.npz", **{k: v for k, v in arrays.items() if k != "format_version"})
     with pytest.raises(ValueError, match="no format_version"):
         TerrainLibrary.load(tmp_path / "nov.npz")
@@ -136,9 +148,14 @@ def test_condition_refuses_an_image_without_a_slice():
 
 def test_tool_writes_a_loadable_library_from_train_truths_only(tmp_path, capsys):
     out = tmp_path / "classes.npz"
-    assert fit_terrain_classes.main(["--out", str(out), "--per-class", "30", "--seed", "2"]) == 0
+    argv = ["--out", str(out), "--per-class", "30", "--seed", "2", "--gate-scans", "4"]
+    assert fit_terrain_classes.main(argv) == 0
     library = TerrainLibrary.load(out)
     assert library.names == problems.names()
+    # the gate lies between what the classes explain of their own scans and of the others'
+    inside, outside = fit_terrain_classes.gate_samples(library, PerceptionConfig.load(CONFIG), 4, 2)
+    assert np.min(inside) > 0.9 and np.max(outside) < np.min(inside)
+    assert np.max(outside) < library.min_inlier_fraction < np.min(inside)
     for c in library.classes:
         problem = problems.get(c.name)
         assert c.n_vertices == problem.prior.n_vertices and c.friction == problem.friction
@@ -154,7 +171,8 @@ def test_tool_writes_a_loadable_library_from_train_truths_only(tmp_path, capsys)
     "bad",
     [[], ["--out", "X", "--per-class", "1"], ["--out", "X", "--seed", "-1"],
      ["--out", "X", "--variance-kept", "1.5"], ["--out", "X", "--floor-mm", "0"],
-     ["--out", "/no/such/dir/x.npz"], ["--out", "X", "--per-class", "many"]],
+     ["--out", "/no/such/dir/x.npz"], ["--out", "X", "--per-class", "many"],
+     ["--out", "X", "--gate-scans", "0"], ["--out", "X", "--perception-config", "/no/such.yaml"]],
 )  # fmt: skip
 def test_tool_rejects_bad_arguments(bad, tmp_path, capsys):
     argv = [str(tmp_path / "x.npz") if a == "X" else a for a in bad]

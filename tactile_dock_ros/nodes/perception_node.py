@@ -6,9 +6,20 @@ holds and their first-look evaluation (``/evaluate_hold``).
 settings file ``perception_config`` (camera extrinsic and its covariance, depth noise, slicing,
 occlusion), on the first valid frame (``capture: first_frame``) or on the next frame after each
 ``~/capture`` request (std_srvs/Trigger; ``capture: on_request``). A frame the perception
-cannot use is logged and skipped. ``prior_source: problem`` publishes the prior of a benchmark
-problem instead (fast and exact; the mock terrain is drawn from that same prior). RViz markers
-on ``~/markers``; ``~/status`` (DiagnosticStatus, latched) carries the compute time.
+cannot use is logged and skipped. ``prior_source: learned`` conditions the learned terrain
+classes of ``terrain_classes`` (``tools.fit_terrain_classes``) on the same image
+(``perception.prior_select``): the best class's posterior when it explains at least
+``min_inlier_fraction`` of the slice (-1: the library's own gate, fitted on training scans),
+else, out of library, the generic depth prior of that image with a warning.
+``prior_source: problem`` publishes the prior of a benchmark problem instead (fast and exact;
+the mock terrain is drawn from that same prior). RViz markers on ``~/markers``; ``~/status``
+(DiagnosticStatus, latched) carries the compute time and, for ``learned``, the model used
+(``learned`` / ``generic``), the class, its inlier fraction, the gate and each class's log
+evidence.
+
+Decision: ``ShapeDistribution`` is unchanged for the learned prior (its posterior is the same
+Gaussian over vertices, which the message carries exactly); the class and the gate's decision
+go to ``~/status`` and the log, so bags recorded before still replay.
 
 Holds: every prior built (the first frame, each ``~/capture``, the problem's prior) is also kept
 as a hold (id from 1, capture stamp, prior) in a ``core.holds.HoldStore`` of ``max_holds``
@@ -60,20 +71,41 @@ from tactile_dock_ros.nodes.common import (
 )
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
+from tactile_dock_ros.perception.learned_prior import TerrainLibrary
+from tactile_dock_ros.perception.prior_select import SelectedPrior, gate_threshold, select_prior
 from tactile_dock_ros.perception.terrain_prior import perceive
 from tactile_dock_ros.srv import EvaluateHold
 
 # the planner's settings of core.planner.plan, for /evaluate_hold (the module docstring)
 PARAMS = [
     *PLANE_TABLE,  # the prior's plane comes from perception_config; the tool pose's from these
-    Param("prior_source", "depth", "where the prior comes from", choices=("depth", "problem")),
+    Param(
+        "prior_source",
+        "depth",
+        "where the prior comes from",
+        choices=("depth", "learned", "problem"),
+    ),
     Param(
         "problem",
         "sloper",
         "benchmark problem (prior_source: problem)",
         choices=tuple(problems.names()),
     ),
-    Param("perception_config", "", "perception settings YAML (prior_source: depth)"),
+    Param("perception_config", "", "perception settings YAML (prior_source: depth, learned)"),
+    Param(
+        "terrain_classes",
+        "",
+        "terrain class library .npz of tools.fit_terrain_classes (prior_source: learned)",
+    ),
+    Param(
+        "min_inlier_fraction",
+        -1.0,
+        "out-of-library gate: least fraction of slice bins the best class must explain, "
+        "else the generic depth prior is used (-1: the library's fitted gate)",
+        "",
+        -1.0,
+        1.0,
+    ),
     Param(
         "capture",
         "first_frame",
@@ -118,12 +150,22 @@ class PerceptionNode(Node):
                 prior = problems.get(self.p.problem).prior
             self.publish_prior(prior, "problem " + self.p.problem, watch.seconds)
             return
+        source = self.p.prior_source
         if not self.p.perception_config:
-            raise ValueError("parameter perception_config is required for prior_source: depth")
+            raise ValueError(f"parameter perception_config is required for prior_source: {source}")
         try:
             self.config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
+        self.library, self.gate = None, None
+        if source == "learned":
+            self.library, self.gate = load_library(
+                self.p.terrain_classes, self.p.min_inlier_fraction
+            )
+            self.get_logger().info(
+                f"learned prior: classes {self.library.names} of {self.p.terrain_classes}, "
+                f"out-of-library gate {self.gate:.3f} (fraction of slice bins)"
+            )
         camera = self.p.camera_frame_id or None
         subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
         subscribe(self, Image, "depth/image", self.on_image, qos.SENSOR, camera)
@@ -216,17 +258,33 @@ class PerceptionNode(Node):
         K = convert.intrinsics_from_camera_info(self.info, msg)
         if not self.pending:
             return
+        source = f"depth {msg.width}x{msg.height}"
+        values: list[KeyValue] = []
         with Stopwatch() as watch:
             try:
-                result = perceive(depth, K, self.config, self.rng)
+                if self.library is None:
+                    prior = perceive(depth, K, self.config, self.rng).prior
+                else:
+                    chosen = select_prior(depth, K, self.config, self.library, self.rng, self.gate)
+                    prior, values = chosen.prior, learned_status(chosen)
+                    source += f", {chosen.model} prior: {chosen.reason}"
             except PerceptionError as err:
                 self.get_logger().warning(f"no prior from this frame: {err}")
                 return
         self.pending = False
-        self.publish_prior(result.prior, f"depth {msg.width}x{msg.height}", watch.seconds)
+        if values and values[0].value == "generic":
+            self.get_logger().warning(f"prior from {source}")
+        self.publish_prior(prior, source, watch.seconds, values)
 
-    def publish_prior(self, prior: GaussianShape, source: str, seconds: float = 0.0) -> None:
-        """Keep ``prior`` as a new hold and publish it (``terrain_prior``, markers, status)."""
+    def publish_prior(
+        self,
+        prior: GaussianShape,
+        source: str,
+        seconds: float = 0.0,
+        values: list[KeyValue] | None = None,
+    ) -> None:
+        """Keep ``prior`` as a new hold and publish it (``terrain_prior``, markers, status with
+        ``values`` appended)."""
         stamp = header(self, self.p.plane_frame_id)
         hold, dropped = self.holds.add(Time.from_msg(stamp.stamp).nanoseconds, prior)
         if dropped is not None:
@@ -245,6 +303,7 @@ class PerceptionNode(Node):
                     KeyValue(key="seconds", value=f"{seconds:.6f}"),
                     KeyValue(key="vertices", value=str(prior.n_vertices)),
                     KeyValue(key="hold_id", value=str(hold.hold_id)),
+                    *(values or []),
                 ],
             )
         )
@@ -252,6 +311,38 @@ class PerceptionNode(Node):
             f"hold {hold.hold_id}, prior from {source}: {prior.n_vertices} vertices, "
             f"{prior.n_basis} basis columns, {seconds:.3f} s"
         )
+
+
+def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary, float]:
+    """The class library and the gate to apply (``min_inlier_fraction`` < 0: the library's);
+    ValueError naming the parameter when either is unusable."""
+    if not path:
+        raise ValueError("parameter terrain_classes is required for prior_source: learned")
+    try:
+        library = TerrainLibrary.load(path)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"parameter terrain_classes: {err}") from err
+    try:
+        gate = gate_threshold(library, None if min_inlier_fraction < 0 else min_inlier_fraction)
+    except ValueError as err:
+        raise ValueError(f"parameter min_inlier_fraction: {err}") from err
+    return library, gate
+
+
+def learned_status(chosen: SelectedPrior) -> list[KeyValue]:
+    """``~/status`` values of a learned-prior capture: model, class, inlier fraction, gate and
+    each class's log evidence (``log_evidence/<class>``)."""
+    return [
+        KeyValue(key="model", value=chosen.model),
+        KeyValue(key="class", value=chosen.class_name),
+        KeyValue(key="best_class", value=chosen.learned.name),
+        KeyValue(key="inlier_fraction", value=f"{chosen.learned.inlier_fraction:.4f}"),
+        KeyValue(key="min_inlier_fraction", value=f"{chosen.min_inlier_fraction:.4f}"),
+        *(
+            KeyValue(key=f"log_evidence/{name}", value=f"{value:.3f}")
+            for name, value in chosen.learned.log_evidence.items()
+        ),
+    ]
 
 
 def main(args: list[str] | None = None) -> int:

@@ -38,8 +38,9 @@ Decisions.
 - Posterior: the shape block of ``(I + H^T W H)^-1`` pushed through ``A``, truncated by an
   eigendecomposition to ``keep`` of its trace; the calibration is marginalized out, because the
   truth is where the tool will touch, in the plane frame, whatever the camera's error was.
-- No out-of-library gate: the best class is returned whatever its fit. The inlier fraction is
-  the quantity such a gate would threshold; its threshold is to be measured on training truths.
+- :func:`condition` returns the best class whatever its fit; the out-of-library gate (the best
+  class's inlier fraction against the library's ``min_inlier_fraction``, fitted on training
+  scans by ``tools.fit_terrain_classes``) is ``perception.prior_select``.
 """
 
 from __future__ import annotations
@@ -55,7 +56,8 @@ from .config import PerceptionConfig, PerceptionError
 from .slicing import band_points, profile_from_points
 from .terrain_prior import calibration_columns
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: adds min_inlier_fraction; version 1 files load without it
+READABLE_VERSIONS = (1, 2)
 FLOOR_M = 0.0003  # isotropic floor std per coordinate of a class, metres
 MODEL_FLOOR_M = 0.0005  # per-bin range error floor (binning, slope regression), metres
 MEDIAN_EFFICIENCY = 1.2533  # std of a median of N normal draws is ~ 1.2533 sigma / sqrt(N)
@@ -113,9 +115,13 @@ class TerrainClass:
 
 @dataclass(frozen=True)
 class TerrainLibrary:
-    """The terrain classes the image is explained by; ``save`` / ``load`` as .npz."""
+    """The terrain classes the image is explained by; ``save`` / ``load`` as .npz.
+
+    ``min_inlier_fraction``: the out-of-library gate fitted with the classes (None: not fitted,
+    e.g. a format 1 file; the caller must then give one)."""
 
     classes: tuple[TerrainClass, ...]
+    min_inlier_fraction: float | None = None
 
     def __post_init__(self) -> None:
         classes = tuple(self.classes)
@@ -124,7 +130,11 @@ class TerrainLibrary:
         names = [c.name for c in classes]
         if len(set(names)) != len(names):
             raise ValueError(f"class names must be unique, got {names}")
+        gate = self.min_inlier_fraction
+        if gate is not None and not (np.isfinite(gate) and 0.0 <= gate <= 1.0):
+            raise ValueError(f"min_inlier_fraction must be in [0, 1] or None, got {gate}")
         object.__setattr__(self, "classes", classes)
+        object.__setattr__(self, "min_inlier_fraction", None if gate is None else float(gate))
 
     @property
     def names(self) -> list[str]:
@@ -138,10 +148,13 @@ class TerrainLibrary:
 
     def save(self, path: Path | str) -> None:
         """Write ``path`` (.npz, no pickles): ``format_version``, ``names``, and per class i
-        ``mean_i``, ``basis_i``, ``closed_i``, ``friction_i``."""
+        ``mean_i``, ``basis_i``, ``closed_i``, ``friction_i``; ``min_inlier_fraction`` (NaN:
+        none)."""
+        gate = np.nan if self.min_inlier_fraction is None else self.min_inlier_fraction
         arrays = {
             "format_version": np.array(FORMAT_VERSION),
             "names": np.array(self.names, dtype=str),
+            "min_inlier_fraction": np.array(gate),
         }
         for i, c in enumerate(self.classes):
             arrays[f"mean_{i}"] = c.mean
@@ -165,10 +178,11 @@ class TerrainLibrary:
         if "format_version" not in arrays:
             raise ValueError(f"{path}: not a terrain class library (no format_version)")
         version = arrays["format_version"]
-        if version.shape != () or int(version) != FORMAT_VERSION:
+        if version.shape != () or int(version) not in READABLE_VERSIONS:
+            readable = " and ".join(map(str, READABLE_VERSIONS))
             raise ValueError(
                 f"{path}: terrain class library format {version.tolist()}, this code reads "
-                f"{FORMAT_VERSION} (refit with tools.fit_terrain_classes)"
+                f"{readable} (refit with tools.fit_terrain_classes)"
             )
         try:
             names = [str(n) for n in arrays["names"]]
@@ -182,7 +196,8 @@ class TerrainLibrary:
                 )
                 for i, name in enumerate(names)
             )
-            return cls(classes)
+            gate = float(arrays["min_inlier_fraction"]) if int(version) >= 2 else np.nan
+            return cls(classes, None if np.isnan(gate) else gate)
         except (KeyError, ValueError, TypeError) as err:
             raise ValueError(f"{path}: malformed terrain class library: {err}") from err
 

@@ -24,7 +24,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--problem", default="sloper", help="benchmark problem of the terrain")
     parser.add_argument("--seed", type=int, default=0, help="seed of the ground-truth draw")
-    parser.add_argument("--prior-source", default="depth", choices=("depth", "problem"))
+    parser.add_argument(
+        "--prior-source",
+        default="depth",
+        choices=("depth", "learned", "problem"),
+        help="perception's prior_source (learned: the shipped terrain classes on the depth image)",
+    )
     parser.add_argument("--png", type=Path, default=Path("episode.png"))
     parser.add_argument("--log-dir", type=Path, default=None, help="node logs (default: temp)")
     parser.add_argument("--bag", type=Path, default=None, help="record a rosbag2 bag here (new)")

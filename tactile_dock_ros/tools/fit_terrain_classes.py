@@ -1,7 +1,8 @@
 """Fit the learned terrain prior's class library from training truths.
 
     python -m tactile_dock_ros.tools.fit_terrain_classes --out config/terrain_classes.npz \\
-        [--per-class 400] [--seed 0] [--variance-kept 0.999] [--floor-mm 0.3]
+        [--per-class 400] [--seed 0] [--variance-kept 0.999] [--floor-mm 0.3] \\
+        [--gate-scans 60] [--perception-config config/perception_mock.yaml]
 
 One class per benchmark problem (``core.problems``): ``--per-class`` truths drawn from the
 problem's truth sampler on the TRAIN split (``tools.bench.splits``) with their own sub-stream
@@ -11,6 +12,13 @@ so no benchmark truth is ever a training truth. Each class is a PCA Gaussian
 (``perception.learned_prior.fit_class``) with the problem's closedness and friction. The
 library is written to ``--out`` (``TerrainLibrary.save``) and a summary per class (vertices, PCA
 directions kept, floor, total std) is printed. Bad arguments exit with status 2 and a message.
+
+The out-of-library gate (``perception.prior_select``) is fitted too: ``--gate-scans`` more train
+truths per class (sub-stream ``GATE_STREAM``) are rendered by the mock camera with the
+``--perception-config`` camera, a drawn calibration error and depth noise, and conditioned on
+the library (in-library) and on the library without their class (out-of-library);
+``prior_select.fit_threshold`` turns the two inlier-fraction samples into
+``min_inlier_fraction``, stored in the library. Both samples' quantiles are printed.
 """
 
 from __future__ import annotations
@@ -22,10 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from ..core import problems
-from ..perception.learned_prior import FLOOR_M, TerrainLibrary, fit_class
+from ..perception.config import PerceptionConfig, PerceptionError
+from ..perception.learned_prior import FLOOR_M, TerrainLibrary, condition, fit_class
+from ..perception.mock_camera import MockCamera, draw_calibration_error
+from ..perception.prior_select import fit_threshold
+from . import package_files
 from .bench.splits import MAX_SEED, split_seed
 
 SUB_STREAM = 99  # second seed word: apart from bench docking's problem indices
+GATE_STREAM = 98  # the gate's scans: neither the classes' truths nor bench docking's
+PERCEPTION_CONFIG = "config/perception_mock.yaml"
 
 
 def training_truths(name: str, per_class: int, seed: int) -> np.ndarray:
@@ -62,6 +76,32 @@ def fit_library(
     return TerrainLibrary(tuple(classes))
 
 
+def gate_samples(
+    library: TerrainLibrary, config: PerceptionConfig, scans: int, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Inlier fractions of the best class on ``scans`` rendered train truths per class: with the
+    whole library (in-library) and without the truth's class (out-of-library; empty for a
+    one-class library). Scans that give no slice are skipped."""
+    camera = MockCamera()
+    base = split_seed("train", seed)
+    inside, outside = [], []
+    for index, terrain in enumerate(library.classes):
+        others = tuple(c for c in library.classes if c.name != terrain.name)
+        for i in range(scans):
+            key = [*base, GATE_STREAM, index, i]
+            truth = problems.get(terrain.name).sample_ground_truth(np.random.default_rng(key))
+            rng = np.random.default_rng([*key, 2])
+            depth = camera.render(truth, config, draw_calibration_error(config.extrinsic, rng), rng)
+            try:
+                inside.append(condition(library, depth, camera.K, config).inlier_fraction)
+                if others:
+                    fit = condition(TerrainLibrary(others), depth, camera.K, config)
+                    outside.append(fit.inlier_fraction)
+            except PerceptionError:
+                continue
+    return np.array(inside), np.array(outside)
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m tactile_dock_ros.tools.fit_terrain_classes",
@@ -87,7 +127,25 @@ def _parser() -> argparse.ArgumentParser:
         default=FLOOR_M * 1000,
         help="least isotropic std per coordinate of a class, millimetres (> 0)",
     )
+    parser.add_argument(
+        "--gate-scans",
+        type=int,
+        default=60,
+        help="rendered train scans per class that fit the out-of-library gate (>= 1)",
+    )
+    parser.add_argument(
+        "--perception-config",
+        default=PERCEPTION_CONFIG,
+        help="camera, depth noise and slice settings of the gate's scans (perception config)",
+    )
     return parser
+
+
+def _quantiles(values: np.ndarray) -> str:
+    if values.size == 0:
+        return "none"
+    q = np.quantile(values, [0.0, 0.01, 0.5, 0.99, 1.0])
+    return "min {:.3f}  q01 {:.3f}  median {:.3f}  q99 {:.3f}  max {:.3f}".format(*q)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -105,7 +163,20 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--out {args.out} is a directory")
     if not args.out.parent.is_dir():
         parser.error(f"--out: no such directory {args.out.parent}")
+    if args.gate_scans < 1:
+        parser.error(f"--gate-scans must be >= 1, got {args.gate_scans}")
+    try:
+        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
+    except (OSError, PerceptionError) as err:
+        parser.error(f"--perception-config: {err}")
     library = fit_library(args.per_class, args.seed, args.variance_kept, args.floor_mm / 1000)
+    print(f"fitting the gate on {args.gate_scans} rendered train scans per class ...", flush=True)
+    inside, outside = gate_samples(library, config, args.gate_scans, args.seed)
+    if inside.size == 0:
+        print(f"no scan gave a slice with {args.perception_config}: the camera does not see them")
+        return 1
+    gate = fit_threshold(inside, outside)
+    library = TerrainLibrary(library.classes, gate)
     library.save(args.out)
     print(f"{'class':13} {'vertices':>8} {'pca dirs':>8} {'floor mm':>8} {'rms std mm':>10}")
     for c in library.classes:
@@ -113,6 +184,9 @@ def main(argv: list[str] | None = None) -> int:
         pca = c.basis.shape[1] - 2 * c.n_vertices
         rms = float(np.sqrt(np.sum(c.basis**2) / c.basis.shape[0]))
         print(f"{c.name:13} {c.n_vertices:>8} {pca:>8} {floor * 1000:>8.3f} {rms * 1000:>10.2f}")
+    print(f"inlier fraction, in library ({inside.size} scans):      {_quantiles(inside)}")
+    print(f"inlier fraction, out of library ({outside.size} scans): {_quantiles(outside)}")
+    print(f"min_inlier_fraction (the out-of-library gate): {gate:.3f}")
     print(f"wrote {args.out} ({args.per_class} train truths per class, seed {args.seed})")
     return 0
 

@@ -10,11 +10,14 @@ the split). Every truth runs one episode per strategy, per prior and per mode:
   truth rendered by the mock profile's depth camera (``--perception-config``, 320x240, focal
   262.5 px) from a pose displaced by a calibration error drawn per truth from the configured
   extrinsic covariance (seeded), then perceived (``perception.mock_camera.depth_prior``);
-  ``learned`` (not run unless asked): the SAME depth image (same seeds, same draws) conditioned
-  on the terrain class library ``--terrain-classes`` (default: the shipped
-  config/terrain_classes.npz, fitted on train truths by ``tools.fit_terrain_classes``) by
-  ``perception.learned_prior.condition``; the truth records carry the chosen class, every
-  class's log-evidence and the inlier fraction, the JSON the library path;
+  ``learned`` (not run unless asked): what perception's ``prior_source: learned`` publishes for
+  the SAME depth image (same seeds, same draws): the terrain class library ``--terrain-classes``
+  (default: the shipped config/terrain_classes.npz, fitted on train truths by
+  ``tools.fit_terrain_classes``) conditioned on it, behind the out-of-library gate
+  (``perception.prior_select``, ``--min-inlier-fraction``, default the library's), else the
+  generic depth prior of that image (then exactly the ``depth`` row's prior); the truth records
+  carry the model used, the best class, every class's log-evidence and the inlier fraction, the
+  JSON the library path, the gate and the fallback count;
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
   (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml; with its
   executor's ``slide_on_slip``, ``--slide-on-slip``, a slip slides on for evidence only,
@@ -70,8 +73,9 @@ import yaml
 from ...core import explore, problems, simulate
 from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
-from ...perception.learned_prior import TerrainLibrary, condition
+from ...perception.learned_prior import TerrainLibrary
 from ...perception.mock_camera import MockCamera, depth_prior, draw_calibration_error
+from ...perception.prior_select import SelectedPrior, gate_threshold, select_prior
 from .. import package_files
 from . import calibration
 from .splits import add_split_argument, split_seed
@@ -166,6 +170,13 @@ def add_arguments(parser) -> None:
         default=TERRAIN_CLASSES,
         help="terrain class library of the learned prior (tools.fit_terrain_classes; default: "
         "the shipped one; a relative path missing here is taken from the package share)",
+    )
+    parser.add_argument(
+        "--min-inlier-fraction",
+        type=float,
+        default=None,
+        help="out-of-library gate of the learned prior, in [0, 1] (0: never falls back; "
+        "default: the library's fitted gate)",
     )
     parser.add_argument(
         "--mode",
@@ -285,14 +296,17 @@ def learned_prior(
     rng: np.random.Generator,
     library: TerrainLibrary,
     camera: MockCamera | None = None,
-):
-    """``(LearnedPrior, calibration error)``: the image ``depth_prior`` renders of ``truth``
-    with the same ``rng`` (the same draws in the same order: calibration error, then depth
-    noise), conditioned on ``library``. Raises ``PerceptionError`` like ``depth_prior``."""
+    min_inlier_fraction: float | None = None,
+) -> tuple[SelectedPrior, np.ndarray]:
+    """``(SelectedPrior, calibration error)``: the image ``depth_prior`` renders of ``truth``
+    with the same ``rng`` (the same draws in the same order: calibration error, depth noise and,
+    out of library, the occlusion samples) through ``prior_select.select_prior``. Raises
+    ``PerceptionError`` like ``depth_prior``."""
     camera = MockCamera() if camera is None else camera
     error = draw_calibration_error(config.extrinsic, rng)
     depth = camera.render(truth, config, error, rng)
-    return condition(library, depth, camera.K, config), error
+    chosen = select_prior(depth, camera.K, config, library, rng, min_inlier_fraction)
+    return chosen, error
 
 
 def _truths(
@@ -333,12 +347,15 @@ def _truths(
         if library is not None:
             try:
                 rng = np.random.default_rng([*base, p_index, i, 2])
-                fit, error = learned_prior(truth, learned_config, rng, library)
-                entry["learned"] = fit.prior
+                chosen, error = learned_prior(
+                    truth, learned_config, rng, library, None, args.min_inlier_fraction
+                )
+                entry["learned"] = chosen.prior
                 entry.setdefault("calibration_error", error.tolist())
-                entry["learned_class"] = fit.name
-                entry["learned_log_evidence"] = fit.log_evidence
-                entry["learned_inlier_fraction"] = fit.inlier_fraction
+                entry["learned_model"] = chosen.model
+                entry["learned_class"] = chosen.learned.name
+                entry["learned_log_evidence"] = chosen.learned.log_evidence
+                entry["learned_inlier_fraction"] = chosen.learned.inlier_fraction
             except PerceptionError as err:
                 entry["learned"], entry["learned_perception_error"] = None, str(err)
         out.append(entry)
@@ -353,6 +370,7 @@ def _truth_record(truth: dict) -> dict:
         "holding_margin_deg",
         "calibration_error",
         "perception_error",
+        "learned_model",
         "learned_class",
         "learned_log_evidence",
         "learned_inlier_fraction",
@@ -664,7 +682,7 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 def run(args) -> dict:
     instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
-    config, library, library_path = None, None, None
+    config, library, library_path, gate = None, None, None, None
     if "depth" in args.prior or "learned" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
     if "learned" in args.prior:
@@ -673,6 +691,10 @@ def run(args) -> dict:
             library = TerrainLibrary.load(library_path)
         except (OSError, ValueError) as err:
             raise SystemExit(f"--terrain-classes: {err}") from err
+        try:
+            gate = gate_threshold(library, args.min_inlier_fraction)
+        except ValueError as err:
+            raise SystemExit(f"--min-inlier-fraction: {err}") from err
     depth_config = config if "depth" in args.prior else None
     truths = {
         name: _truths(args, name, instances, depth_config, args.split, library, config)
@@ -727,6 +749,13 @@ def run(args) -> dict:
     print(HEADER)
     for row in results:
         print(_line(row))
+    fallbacks = None
+    if library is not None:
+        fallbacks = {
+            name: sum(t.get("learned_model") == "generic" for t in entries)
+            for name, entries in truths.items()
+        }
+        print(f"learned prior: generic fallbacks per problem {fallbacks} (gate {gate:.3f})")
     calibration = attempt_calibration(results)
     print("\nP_dock of the executed attempts, problems pooled (bins: predicted/docked (attempts))")
     print(CALIBRATION_HEADER)
@@ -748,6 +777,8 @@ def run(args) -> dict:
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
         "terrain_classes": None if library_path is None else str(library_path.resolve()),
+        "min_inlier_fraction": gate,
+        "learned_fallbacks": fallbacks,
         "note": "wall times per process, from a shared 2-core machine "
         f"running {args.workers} episode process(es)",
         "truths": {name: [_truth_record(t) for t in entries] for name, entries in truths.items()},

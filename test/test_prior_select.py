@@ -1,0 +1,184 @@
+"""The out-of-library gate: the learned prior where the library explains the image, the generic
+depth prior where it does not (``perception.prior_select``), and perception's ``learned``
+source built from the launch file."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from node_helpers import launch_nodes, node_from_launch
+
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.nodes import convert
+from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
+from tactile_dock_ros.perception.learned_prior import TerrainLibrary
+from tactile_dock_ros.perception.mock_camera import MockCamera, draw_calibration_error
+from tactile_dock_ros.perception.prior_select import (
+    SINGLE_CLASS_MARGIN,
+    fit_threshold,
+    gate_threshold,
+    select_prior,
+)
+from tactile_dock_ros.perception.terrain_prior import perceive
+from tactile_dock_ros.tools.bench.splits import split_seed
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "config" / "terrain_classes.npz"
+CONFIG = PerceptionConfig.load(REPO / "config" / "perception_mock.yaml")
+CAMERA = MockCamera()
+
+
+def _image(name: str, i: int) -> np.ndarray:
+    """A test-split truth of problem ``name`` as the mock camera sees it."""
+    base = split_seed("test", 0)
+    p = problems.names().index(name)
+    truth = problems.get(name).sample_ground_truth(np.random.default_rng([*base, p, i]))
+    rng = np.random.default_rng([*base, p, i, 2])
+    return CAMERA.render(truth, CONFIG, draw_calibration_error(CONFIG.extrinsic, rng), rng)
+
+
+def _without(library: TerrainLibrary, name: str) -> TerrainLibrary:
+    return TerrainLibrary(
+        tuple(c for c in library.classes if c.name != name), library.min_inlier_fraction
+    )
+
+
+@pytest.mark.parametrize("name", problems.names())
+def test_in_library_images_get_the_learned_prior_of_their_class(name):
+    """Ten held-out images per class: at least 8 pass the gate (the train scans put ~1 % under
+    it; notch test images 0 and 19 explain 0.936 and 0.948 of their slice), each with its own
+    class."""
+    library = TerrainLibrary.load(SHIPPED)
+    chosen = [
+        select_prior(_image(name, i), CAMERA.K, CONFIG, library, np.random.default_rng(i))
+        for i in range(10)
+    ]
+    learned = [c for c in chosen if c.model == "learned"]
+    assert len(learned) >= 8
+    for c in learned:
+        assert c.class_name == name and c.prior is c.learned.prior
+        assert c.prior.n_vertices == library.get(name).n_vertices
+        assert c.min_inlier_fraction == library.min_inlier_fraction
+        assert c.learned.inlier_fraction >= c.min_inlier_fraction
+        assert name in c.reason
+
+
+@pytest.mark.parametrize("name", problems.names())
+def test_a_wall_the_library_does_not_know_gets_the_generic_prior(name):
+    """The library without the truth's class: the nearest wall it does not know."""
+    library = _without(TerrainLibrary.load(SHIPPED), name)
+    depth = _image(name, 1)
+    chosen = select_prior(depth, CAMERA.K, CONFIG, library, np.random.default_rng(5))
+    assert chosen.model == "generic" and chosen.class_name == ""
+    assert chosen.learned.name != name  # the best class is named in the reason
+    assert chosen.learned.inlier_fraction < chosen.min_inlier_fraction
+    assert "out of library" in chosen.reason and chosen.learned.name in chosen.reason
+    generic = perceive(depth, CAMERA.K, CONFIG, np.random.default_rng(5)).prior
+    np.testing.assert_array_equal(chosen.prior.mean, generic.mean)
+    np.testing.assert_array_equal(chosen.prior.basis, generic.basis)
+
+
+def test_the_gate_is_the_library_s_unless_given():
+    library = _without(TerrainLibrary.load(SHIPPED), "notch")
+    depth = _image("notch", 0)
+    rng = np.random.default_rng(0)
+    share = select_prior(depth, CAMERA.K, CONFIG, library, rng).learned.inlier_fraction
+    assert share < library.min_inlier_fraction
+    for gate, model in ((0.0, "learned"), (share, "learned"), (share + 1e-6, "generic")):
+        chosen = select_prior(depth, CAMERA.K, CONFIG, library, rng, gate)
+        assert (chosen.model, chosen.min_inlier_fraction) == (model, gate)
+    assert gate_threshold(library, None) == library.min_inlier_fraction
+    assert gate_threshold(library, 0.5) == 0.5
+    ungated = TerrainLibrary(library.classes)
+    with pytest.raises(ValueError, match="no fitted min_inlier_fraction"):
+        gate_threshold(ungated, None)
+    for bad in (-0.1, 1.1, float("nan")):
+        with pytest.raises(ValueError, match="in \\[0, 1\\]"):
+            gate_threshold(library, bad)
+    with pytest.raises(ValueError, match="min_inlier_fraction"):
+        TerrainLibrary(library.classes, 1.5)
+
+
+def test_an_image_without_a_slice_is_a_perception_error():
+    library = TerrainLibrary.load(SHIPPED)
+    empty = np.full((CAMERA.height, CAMERA.width), np.nan)
+    with pytest.raises(PerceptionError):
+        select_prior(empty, CAMERA.K, CONFIG, library, np.random.default_rng(0))
+
+
+def test_fit_threshold_separates_or_keeps_the_library_s_images():
+    rng = np.random.default_rng(1)
+    inside = rng.uniform(0.97, 1.0, 500)
+    outside = rng.uniform(0.3, 0.9, 500)
+    low, high = np.quantile(inside, 0.01), np.quantile(outside, 0.99)
+    assert fit_threshold(inside, outside) == pytest.approx(0.5 * (low + high))
+    assert high < fit_threshold(inside, outside) < low
+    # overlapping samples, or no second class: 1 % of the library's images fall back at most
+    overlap = rng.uniform(0.5, 0.99, 500)
+    assert fit_threshold(inside, overlap) == pytest.approx(low - SINGLE_CLASS_MARGIN)
+    assert fit_threshold(inside, []) == pytest.approx(low - SINGLE_CLASS_MARGIN)
+    assert fit_threshold([0.01, 0.01], []) == 0.0
+    with pytest.raises(ValueError):
+        fit_threshold([], outside)
+    with pytest.raises(ValueError):
+        fit_threshold([0.9, np.nan], outside)
+
+
+def _perception(tmp_path, library: TerrainLibrary | None = None, **arguments):
+    """The perception node of the mock launch with ``prior_source: learned``."""
+    if library is not None:
+        library.save(tmp_path / "classes.npz")
+        arguments["terrain_classes"] = str(tmp_path / "classes.npz")
+    spec = launch_nodes("mock", prior_source="learned", **arguments)["perception"]
+    return node_from_launch(spec, tmp_path)
+
+
+def _capture(node, depth: np.ndarray) -> list:
+    """Feed ``depth`` and its camera info to ``node``; the status messages it publishes."""
+    statuses = []
+    node.status_pub.publish = statuses.append
+    header = convert.Header(frame_id="depth_camera")
+    node.on_info(convert.camera_info(CAMERA.K, CAMERA.width, CAMERA.height, header))
+    node.on_image(convert.depth_to_image(depth.astype(np.float32), header))
+    return statuses
+
+
+def test_perception_node_publishes_the_learned_prior_and_says_which(tmp_path):
+    with _perception(tmp_path) as (node, _):
+        statuses = _capture(node, _image("three_ledges", 1))
+        hold = node.holds.get(1)
+    assert (
+        hold is not None and hold.prior.n_vertices == problems.get("three_ledges").prior.n_vertices
+    )
+    values = {kv.key: kv.value for kv in statuses[-1].values}
+    assert values["model"] == "learned" and values["class"] == "three_ledges"
+    assert float(values["inlier_fraction"]) >= float(values["min_inlier_fraction"])
+    assert {f"log_evidence/{n}" for n in problems.names()} <= set(values)
+
+
+def test_perception_node_falls_back_out_of_library(tmp_path):
+    library = _without(TerrainLibrary.load(SHIPPED), "sloper")
+    with _perception(tmp_path, library) as (node, _):
+        statuses = _capture(node, _image("sloper", 0))
+        hold = node.holds.get(1)
+    values = {kv.key: kv.value for kv in statuses[-1].values}
+    assert values["model"] == "generic" and values["class"] == ""
+    assert values["best_class"] != "sloper"
+    assert hold is not None and hold.prior.n_vertices not in (c.n_vertices for c in library.classes)
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [({"terrain_classes": ""}, "terrain_classes is required"),
+     ({"terrain_classes": "/no/such/classes.npz"}, "terrain_classes"),
+     ({"terrain_classes": str(REPO / "config" / "mock.yaml")}, "not a terrain class library")],
+)  # fmt: skip
+def test_perception_node_refuses_a_bad_library(tmp_path, arguments, message):
+    with pytest.raises(ValueError, match=message), _perception(tmp_path, **arguments):
+        pass
+
+
+def test_perception_node_needs_a_gate_for_an_ungated_library(tmp_path):
+    ungated = TerrainLibrary(TerrainLibrary.load(SHIPPED).classes)
+    with pytest.raises(ValueError, match="min_inlier_fraction"), _perception(tmp_path, ungated):
+        pass
