@@ -72,3 +72,14 @@ def test_bench_docking_refuses_a_bad_library(tmp_path):
         bench.main(["docking", "--quick", "--prior", "learned", "--terrain-classes", str(bad)])
     with pytest.raises(SystemExit, match=r"--min-inlier-fraction: .*\[0, 1\]"):
         bench.main(["docking", "--quick", "--prior", "learned", "--min-inlier-fraction", "1.5"])
+
+
+def test_bench_docking_loads_the_compiled_kernels_before_any_timed_cycle(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(docking.hmc_exit, "warm_up", lambda: calls.append("hmc_exit"))
+    monkeypatch.setattr(docking.descent_scan, "warm_up", lambda: calls.append("descent_scan"))
+    episode = docking._episode
+    monkeypatch.setattr(docking, "_episode", lambda task: calls.append("episode") or episode(task))
+    argv = ["docking", "--quick", "--prior", "problem", "--strategies", "ours", "--workers", "1"]
+    assert bench.main([*argv, "--problems", "sloper", "--json", str(tmp_path / "x.json")]) == 0
+    assert calls[:2] == ["hmc_exit", "descent_scan"] and set(calls[2:]) == {"episode"}
