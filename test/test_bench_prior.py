@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 
+from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.tools import bench
 from tactile_dock_ros.tools.bench import prior, splits
 
@@ -50,3 +52,35 @@ def test_the_json_records_the_split(tmp_path):
         assert report["split"] == split
         (rows[split],) = report["rows"]
     assert rows["train"]["calibration_error"] != rows["test"]["calibration_error"]
+
+
+def test_learned_scores_the_learned_prior_of_the_same_images(tmp_path):
+    out = tmp_path / "learned.json"
+    argv = ["prior", "--random", "2", "--per-problem", "1", "--learned", "--json", str(out)]
+    assert bench.main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["terrain_classes"].endswith("terrain_classes.npz")
+    learned = report["summary"]["all"]["learned"]
+    assert learned["terrains"] == 5 and learned["no_prior"] == 0
+    # random walls are in no class: the gate gives them the generic prior, scored the same way
+    random = report["summary"]["random"]["learned"]
+    assert random["generic_fallbacks"] == 2 and random["vertex_coverage_2sigma"] is None
+    rows = {r["kind"]: r["learned"] for r in report["rows"] if r["kind"] != "random"}
+    for name, row in rows.items():  # one held-out image each (notch's is a 2.3-sigma camera)
+        summary = report["summary"][name]["learned"]
+        assert summary["class_correct"] == summary["learned"] == 1
+        assert row["vertices"] == problems.get(name).prior.n_vertices
+        assert summary["vertex_coverage_2sigma"] == row["vertices_covered"] / row["vertices"]
+    covered = sum(r["vertices_covered"] for r in rows.values())
+    assert learned["vertex_coverage_2sigma"] == covered / sum(r["vertices"] for r in rows.values())
+    assert 0.5 <= learned["coverage_2sigma"] <= 1.0
+    generic = next(r for r in report["rows"] if r["kind"] == "random")
+    assert generic["learned"]["model"] == "generic" and generic["learned"]["vertices"] == 0
+
+
+def test_vertex_coverage_counts_vertices_inside_their_two_sigma_ellipse():
+    shape = GaussianShape(np.zeros(4), np.diag([1.0, 1.0, 2.0, 2.0]))
+    inside = np.array([[1.0, 1.0], [2.0, 2.0]])  # 2.0 and 2.0 sigma^2 < 6.16
+    outside = np.array([[3.0, 0.0], [5.0, 0.0]])  # 9.0 and 6.25
+    assert prior.vertex_coverage(shape, inside) == 2
+    assert prior.vertex_coverage(shape, outside) == 0

@@ -21,6 +21,13 @@ correlation of neighbouring edges' angles. Deterministic per
 camera errors from a held-out seed stream and is what figures quote; ``train`` draws them as
 before the option and is what the depth model was tuned on; the JSON records the split);
 ``--repeats`` is unused (nothing is timed).
+
+``--learned`` also scores what perception's ``prior_source: learned`` publishes for the same
+image (``perception.prior_select`` with the ``--terrain-classes`` library and its gate): per
+kind, the generic fallbacks, the class accuracy, the same 2-sigma band coverage of the truth
+points, and, where the class is the truth's own problem, the vertex coverage (each truth vertex
+inside its vertex's 2-D 2-sigma ellipse, 0.954 for a calibrated Gaussian: the class's vertices
+correspond to the problem's truth vertices).
 """
 
 from __future__ import annotations
@@ -34,6 +41,8 @@ from ...core import problems
 from ...perception import evaluation, scenes
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.depth import decode_depth, encode_depth
+from ...perception.learned_prior import TerrainLibrary
+from ...perception.prior_select import select_prior
 from ...perception.render import render_depth
 from ...perception.terrain_prior import perceive
 from .. import package_files
@@ -45,6 +54,7 @@ FOCAL_PX = 262.5
 COVERAGE_SPACING_M = 0.01
 TARGET_COVERAGE = (0.93, 0.99)
 MODELS = ("independent", "correlated")  # old, new
+CHI2_2D_2SIGMA = float(-2.0 * np.log(1.0 - 0.954))  # a 2-D Gaussian's 2-sigma (95.4 %) ellipse
 
 
 def add_arguments(parser) -> None:
@@ -63,6 +73,17 @@ def add_arguments(parser) -> None:
         type=float,
         default=1.0,
         help="scale of the drawn calibration error (0: a perfectly calibrated camera)",
+    )
+    parser.add_argument(
+        "--learned",
+        action="store_true",
+        help="also score the learned prior (perception's prior_source: learned) of each image",
+    )
+    parser.add_argument(
+        "--terrain-classes",
+        type=Path,
+        default=Path("config/terrain_classes.npz"),
+        help="terrain class library of --learned (its fitted gate is used)",
     )
     add_split_argument(parser)
 
@@ -98,18 +119,71 @@ def _offset(seed, k: int):
     return seed + k if isinstance(seed, (int, np.integer)) else (*seed, k)
 
 
-def score_terrain(
-    truth, config: PerceptionConfig, K, encoding: str, seed, calibration_scale: float = 1.0
-) -> dict:
-    """Both models' scores on one terrain ({"error": ...} when the camera makes no prior);
-    ``seed``: an int, or a sequence (``terrain_seed``)."""
+def _image(truth, config: PerceptionConfig, K, encoding: str, seed, calibration_scale: float):
+    """(decoded depth image, drawn calibration error) of ``truth`` (``seed``'s draws)."""
     rng = np.random.default_rng(seed)
     error = calibration_scale * rng.multivariate_normal(np.zeros(6), config.extrinsic.covariance)
     depth = render_depth(
         truth, K, config.extrinsic.T_plane_camera, IMAGE, rng, config.depth_noise, error
     )
     data, step = encode_depth(depth, encoding)
-    depth = decode_depth(data, IMAGE[1], IMAGE[0], encoding, False, step)
+    return decode_depth(data, IMAGE[1], IMAGE[0], encoding, False, step), error
+
+
+def vertex_coverage(prior, truth: np.ndarray) -> int:
+    """Truth vertices inside their prior vertex's 2-D 2-sigma ellipse (same vertex order)."""
+    n = prior.n_vertices
+    B = prior.basis.reshape(n, 2, -1)
+    S = B @ B.transpose(0, 2, 1) + 1e-12 * np.eye(2)
+    err = np.asarray(truth, float) - prior.mean_vertices
+    return int(np.sum(np.einsum("ni,nij,nj->n", err, np.linalg.inv(S), err) <= CHI2_2D_2SIGMA))
+
+
+def score_learned(depth, truth, kind: str, config, K, library: TerrainLibrary, seed) -> dict:
+    """The learned prior's scores on one image (``--learned``)."""
+    try:
+        chosen = select_prior(depth, K, config, library, np.random.default_rng(_offset(seed, 3)))
+    except PerceptionError as err:
+        return {"error": str(err)}
+    prior = chosen.prior
+    frac, count = evaluation.coverage(prior, truth, chosen.learned.rays.origin, COVERAGE_SPACING_M)
+    own = chosen.model == "learned" and kind == chosen.class_name
+    return {
+        "model": chosen.model,
+        "class": chosen.learned.name,
+        "inlier_fraction": chosen.learned.inlier_fraction,
+        "covered": frac * count,
+        "points": count,
+        "vertices_covered": vertex_coverage(prior, truth) if own else 0,
+        "vertices": prior.n_vertices if own else 0,
+    }
+
+
+def summarize_learned(rows: list[dict], kinds: list[str]) -> dict:
+    sel = [(r["kind"], r["learned"]) for r in rows if r["kind"] in kinds and "learned" in r]
+    scored = [s for _, s in sel if "error" not in s]
+    learned = [(k, s) for k, s in sel if s.get("model") == "learned"]
+    vertices = sum(s["vertices"] for s in scored)
+    return {
+        "terrains": len(sel),
+        "no_prior": len(sel) - len(scored),
+        "generic_fallbacks": sum(s["model"] == "generic" for s in scored),
+        "class_correct": sum(k == s["class"] for k, s in learned),
+        "learned": len(learned),
+        "coverage_2sigma": sum(s["covered"] for s in scored)
+        / max(sum(s["points"] for s in scored), 1),
+        "vertex_coverage_2sigma": (
+            sum(s["vertices_covered"] for s in scored) / vertices if vertices else None
+        ),
+    }
+
+
+def score_terrain(
+    truth, config: PerceptionConfig, K, encoding: str, seed, calibration_scale: float = 1.0
+) -> dict:
+    """Both models' scores on one terrain ({"error": ...} when the camera makes no prior);
+    ``seed``: an int, or a sequence (``terrain_seed``)."""
+    depth, error = _image(truth, config, K, encoding, seed, calibration_scale)
     out = {"calibration_error": error.tolist()}
     for model in MODELS:
         surface = dataclasses.replace(config.surface, depth_model=model)
@@ -178,8 +252,21 @@ def summarize(rows: list[dict], model: str, kinds: list[str]) -> dict:
     }
 
 
+def _number(value: float | None) -> str:
+    return f"{'-':>15}" if value is None else f"{value:15.3f}"
+
+
 def run(args) -> dict:
     config = PerceptionConfig.load(package_files.resolve(args.config))
+    library = None
+    if args.learned:
+        try:
+            library = TerrainLibrary.load(package_files.resolve(args.terrain_classes))
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"--terrain-classes: {err}") from err
+    learned_config = dataclasses.replace(  # the scored prior has no tails (score_terrain)
+        config, occlusion=dataclasses.replace(config.occlusion, tail_m=0.0)
+    )
     K = mock_intrinsics()
     rows, failed = [], []
     base = split_seed(args.split, args.seed)
@@ -189,7 +276,11 @@ def run(args) -> dict:
         if "error" in out:
             failed.append({"terrain": label, "error": out["error"]})
             continue
-        rows.append({"terrain": label, "kind": label.rsplit("_", 1)[0], **out})
+        kind = label.rsplit("_", 1)[0]
+        if library is not None:
+            depth, _ = _image(truth, config, K, args.encoding, seed, args.calibration_scale)
+            out["learned"] = score_learned(depth, truth, kind, learned_config, K, library, seed)
+        rows.append({"terrain": label, "kind": kind, **out})
     kinds = sorted({r["kind"] for r in rows})
     groups = {"all": kinds, **{k: [k] for k in kinds}}
     summary = {}
@@ -229,6 +320,20 @@ def run(args) -> dict:
             f"  {old['median_edge_angle_std_deg']:6.2f} / {new['median_edge_angle_std_deg']:<6.2f}"
             f"  {old['median_adjacent_angle_corr']:5.2f} / {new['median_adjacent_angle_corr']:.2f}"
         )
+    if library is not None:
+        print(f"\nlearned prior ({args.terrain_classes}, gate {library.min_inlier_fraction:.3f})")
+        print(
+            f"{'terrains':<14}{'n':>4}  {'fallbacks':>9}  {'class ok':>9}  {'coverage':>8}  "
+            f"{'vertex coverage':>15}"
+        )
+        for group, members in groups.items():
+            learned = summarize_learned(rows, members)
+            summary[group]["learned"] = learned
+            print(
+                f"{group:<14}{learned['terrains']:>4}  {learned['generic_fallbacks']:>9}"
+                f"  {learned['class_correct']:>4}/{learned['learned']:<4}"
+                f"  {learned['coverage_2sigma']:8.3f}  {_number(learned['vertex_coverage_2sigma'])}"
+            )
     print(f"target coverage {TARGET_COVERAGE}; {len(failed)} terrains gave no prior")
     return {
         "split": args.split,
@@ -238,6 +343,7 @@ def run(args) -> dict:
         "encoding": args.encoding,
         "calibration_scale": args.calibration_scale,
         "target_coverage": list(TARGET_COVERAGE),
+        "terrain_classes": str(args.terrain_classes) if args.learned else None,
         "summary": summary,
         "failed": failed,
         "rows": rows,
