@@ -63,3 +63,55 @@ def test_the_reliability_diagram_is_written(tmp_path):
     path = tmp_path / "out" / "reliability.png"
     calibration.reliability_png(path, "test", series)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _replicated(rng, truths, copies, scale=1.0):
+    """``copies`` near-identical attempts per truth (bench docking's episode seeds): a shared
+    prediction plus sampling noise, one shared outcome drawn from the true rate."""
+    rate = rng.uniform(0.0, 1.0, truths)
+    docked = np.repeat((rng.random(truths) < rate).astype(float), copies)
+    noisy = rate[:, None] + rng.normal(0.0, 0.01, (truths, copies))
+    predicted = np.clip(0.5 + scale * (noisy.ravel() - 0.5), 0.0, 1.0)
+    return predicted, docked, np.repeat(np.arange(truths), copies)
+
+
+def test_clustered_z_accepts_calibrated_copies_that_the_classic_z_rejects():
+    """120 truths, 9 near copies of each attempt, calibrated: the classic z sees 1,080
+    independent attempts and rejects far more often than 5 % (13 of 40 seeds); the
+    clustered one about 5 % (2 of 40)."""
+    classic = clustered = 0
+    for seed in range(40):
+        predicted, docked, truth = _replicated(np.random.default_rng(seed), 120, 9)
+        classic += abs(calibration.spiegelhalter_z(predicted, docked)) > 1.96
+        clustered += abs(calibration.clustered_spiegelhalter_z(predicted, docked, truth)) > 1.96
+    assert classic >= 8 and clustered <= 5
+
+
+def test_clustered_z_still_rejects_predictions_shrunk_to_the_middle():
+    rejected = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        predicted, docked, truth = _replicated(rng, 300, 9, scale=0.5)
+        rejected += calibration.clustered_spiegelhalter_z(predicted, docked, truth) < -1.96
+    assert rejected == 20
+
+
+def test_clustered_z_ignores_exact_copies_and_matches_the_classic_z_on_singletons():
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0.0, 1.0, 3000)
+    docked = (rng.random(3000) < p).astype(float)
+    single = calibration.clustered_spiegelhalter_z(p, docked, np.arange(3000))
+    copied = calibration.clustered_spiegelhalter_z(
+        np.repeat(p, 4), np.repeat(docked, 4), np.repeat(np.arange(3000), 4)
+    )
+    assert copied == pytest.approx(single)
+    assert single == pytest.approx(calibration.spiegelhalter_z(p, docked), abs=0.15)
+    assert calibration.spiegelhalter_z(np.repeat(p, 4), np.repeat(docked, 4)) == pytest.approx(
+        2 * calibration.spiegelhalter_z(p, docked)
+    )
+
+
+def test_clustered_z_refuses_a_label_count_mismatch_and_gives_no_test_without_variance():
+    with pytest.raises(ValueError):
+        calibration.clustered_spiegelhalter_z([0.5, 0.5], [0, 1], [0])
+    assert calibration.clustered_spiegelhalter_z([0.0, 1.0], [0, 1], [0, 1]) == 0.0
