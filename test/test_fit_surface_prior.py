@@ -10,7 +10,7 @@ import yaml
 
 from tactile_dock_ros.perception import surface_fit
 from tactile_dock_ros.perception.config import PerceptionConfig
-from tactile_dock_ros.tools import fit_surface_prior
+from tactile_dock_ros.tools import depth_scans, fit_surface_prior
 from tactile_dock_ros.tools.bench import prior as bench_prior
 
 MOCK = bench_prior.MOCK_CONFIG
@@ -51,9 +51,9 @@ def test_fit_writes_a_config_the_perception_loads(fitted):
 def test_npy_metres_and_png_millimetres_read_alike(fitted, tmp_path):
     scans = fitted[0]
     config = PerceptionConfig.load(MOCK)
-    png = fit_surface_prior.read_depth(scans / "scan_0000.png", config)
+    png = depth_scans.read_depth(scans / "scan_0000.png", config)
     np.save(tmp_path / "scan.npy", png)
-    np.testing.assert_array_equal(fit_surface_prior.read_depth(tmp_path / "scan.npy", config), png)
+    np.testing.assert_array_equal(depth_scans.read_depth(tmp_path / "scan.npy", config), png)
 
 
 def test_render_alone_writes_scans_and_no_config(tmp_path):

@@ -228,16 +228,39 @@ def fit_class(
     X = X.reshape(N, 2 * n)
     mu = X.mean(axis=0)
     _, s, vt = np.linalg.svd(X - mu, full_matrices=False)
-    var = s**2 / (N - 1)
+    basis = _pca_basis(s**2 / (N - 1), vt.T, variance_kept, floor_m)
+    return TerrainClass(name, mu.reshape(n, 2), basis, closed, friction)
+
+
+def class_from_moments(
+    terrain: TerrainClass,
+    mean: np.ndarray,
+    covariance: np.ndarray,
+    variance_kept: float = 0.999,
+    floor_m: float = FLOOR_M,
+) -> TerrainClass:
+    """``terrain`` with a new mean (2n,) and covariance (2n, 2n), truncated as ``fit_class``
+    truncates a sample covariance."""
+    values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
+    order = np.argsort(values)[::-1]
+    basis = _pca_basis(values[order].clip(0.0), vectors[:, order], variance_kept, floor_m)
+    mean = np.asarray(mean, float).reshape(-1, 2)
+    return TerrainClass(terrain.name, mean, basis, terrain.closed, terrain.friction)
+
+
+def _pca_basis(var: np.ndarray, vectors: np.ndarray, variance_kept: float, floor_m: float):
+    """Columns: the leading directions (``vectors`` columns, variances ``var`` descending)
+    holding ``variance_kept`` of the variance, scaled by their stds, then ``f I`` with
+    ``f = max(floor_m, sqrt(dropped variance / dim))``."""
+    dim = vectors.shape[0]
     total = var.sum()
     if total > 0:
         k = int(np.searchsorted(np.cumsum(var) / total, variance_kept - 1e-12) + 1)
         k = min(k, len(var))
     else:
         k = 0
-    floor = max(floor_m, float(np.sqrt(var[k:].sum() / (2 * n))))
-    basis = np.hstack([vt[:k].T * np.sqrt(var[:k]), floor * np.eye(2 * n)])
-    return TerrainClass(name, mu.reshape(n, 2), basis, closed, friction)
+    floor = max(floor_m, float(np.sqrt(var[k:].sum() / dim)))
+    return np.hstack([vectors[:, :k] * np.sqrt(var[:k]), floor * np.eye(dim)])
 
 
 @dataclass(frozen=True)
@@ -421,7 +444,13 @@ def condition(
     """Every class of ``library`` conditioned on the depth image (intrinsics ``K``, the
     extrinsic, depth noise and slice settings of ``config``); the class of largest Laplace
     evidence is chosen. Raises PerceptionError when the image gives too few slice bins."""
-    rays = slice_rays(depth, K, config)
+    return condition_rays(library, slice_rays(depth, K, config), config, keep)
+
+
+def condition_rays(
+    library: TerrainLibrary, rays: SliceRays, config: PerceptionConfig, keep: float = 0.9999
+) -> LearnedPrior:
+    """:func:`condition` on an image's slice rays (``slice_rays``)."""
     fits = sorted(
         (condition_class(c, rays, config, keep) for c in library.classes),
         key=lambda f: -f.log_evidence,

@@ -19,13 +19,14 @@ fall back (the generic prior is the safe side).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.shape import GaussianShape
 from .config import PerceptionConfig
-from .learned_prior import LearnedPrior, TerrainLibrary, condition
+from .learned_prior import LearnedPrior, SliceRays, TerrainLibrary, condition, condition_rays
 from .terrain_prior import perceive
 
 IN_LIBRARY_QUANTILE = 0.01
@@ -94,6 +95,21 @@ def select_prior(
         f"(gate {gate:.3f}); generic depth prior"
     )
     return SelectedPrior(perceive(depth, K, config, rng).prior, "generic", fit, gate, reason)
+
+
+def inlier_samples(
+    library: TerrainLibrary, scans: Sequence[tuple[SliceRays, str]], config: PerceptionConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """The best class's inlier fraction per scan ``(rays, its class name)`` with the whole
+    library (in library) and with the library without that class (out of library; empty for a
+    one-class library): the two samples :func:`fit_threshold` takes."""
+    inside, outside = [], []
+    for rays, name in scans:
+        inside.append(condition_rays(library, rays, config).inlier_fraction)
+        others = tuple(c for c in library.classes if c.name != name)
+        if others:
+            outside.append(condition_rays(TerrainLibrary(others), rays, config).inlier_fraction)
+    return np.array(inside), np.array(outside)
 
 
 def fit_threshold(in_library: np.ndarray, out_of_library: np.ndarray) -> float:

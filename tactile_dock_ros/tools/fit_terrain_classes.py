@@ -31,9 +31,9 @@ import numpy as np
 
 from ..core import problems
 from ..perception.config import PerceptionConfig, PerceptionError
-from ..perception.learned_prior import FLOOR_M, TerrainLibrary, condition, fit_class
+from ..perception.learned_prior import FLOOR_M, TerrainLibrary, fit_class, slice_rays
 from ..perception.mock_camera import MockCamera, draw_calibration_error
-from ..perception.prior_select import fit_threshold
+from ..perception.prior_select import fit_threshold, inlier_samples
 from . import package_files
 from .bench.splits import MAX_SEED, split_seed
 
@@ -79,27 +79,22 @@ def fit_library(
 def gate_samples(
     library: TerrainLibrary, config: PerceptionConfig, scans: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Inlier fractions of the best class on ``scans`` rendered train truths per class: with the
-    whole library (in-library) and without the truth's class (out-of-library; empty for a
-    one-class library). Scans that give no slice are skipped."""
+    """``prior_select.inlier_samples`` of ``scans`` rendered train truths per class (sub-stream
+    ``GATE_STREAM``); scans that give no slice are skipped."""
     camera = MockCamera()
     base = split_seed("train", seed)
-    inside, outside = [], []
+    rendered = []
     for index, terrain in enumerate(library.classes):
-        others = tuple(c for c in library.classes if c.name != terrain.name)
         for i in range(scans):
             key = [*base, GATE_STREAM, index, i]
             truth = problems.get(terrain.name).sample_ground_truth(np.random.default_rng(key))
             rng = np.random.default_rng([*key, 2])
             depth = camera.render(truth, config, draw_calibration_error(config.extrinsic, rng), rng)
             try:
-                inside.append(condition(library, depth, camera.K, config).inlier_fraction)
-                if others:
-                    fit = condition(TerrainLibrary(others), depth, camera.K, config)
-                    outside.append(fit.inlier_fraction)
+                rendered.append((slice_rays(depth, camera.K, config), terrain.name))
             except PerceptionError:
                 continue
-    return np.array(inside), np.array(outside)
+    return inlier_samples(library, rendered, config)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -141,7 +136,8 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _quantiles(values: np.ndarray) -> str:
+def quantile_summary(values: np.ndarray) -> str:
+    """min, 1 %, median, 99 % and max of ``values`` on one line (``none`` when empty)."""
     if values.size == 0:
         return "none"
     q = np.quantile(values, [0.0, 0.01, 0.5, 0.99, 1.0])
@@ -184,8 +180,8 @@ def main(argv: list[str] | None = None) -> int:
         pca = c.basis.shape[1] - 2 * c.n_vertices
         rms = float(np.sqrt(np.sum(c.basis**2) / c.basis.shape[0]))
         print(f"{c.name:13} {c.n_vertices:>8} {pca:>8} {floor * 1000:>8.3f} {rms * 1000:>10.2f}")
-    print(f"inlier fraction, in library ({inside.size} scans):      {_quantiles(inside)}")
-    print(f"inlier fraction, out of library ({outside.size} scans): {_quantiles(outside)}")
+    print(f"inlier fraction, in library ({inside.size} scans):      {quantile_summary(inside)}")
+    print(f"inlier fraction, out of library ({outside.size} scans): {quantile_summary(outside)}")
     print(f"min_inlier_fraction (the out-of-library gate): {gate:.3f}")
     print(f"wrote {args.out} ({args.per_class} train truths per class, seed {args.seed})")
     return 0

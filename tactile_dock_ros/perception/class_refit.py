@@ -1,0 +1,122 @@
+"""Refit a terrain class library from depth scans alone (no ground truth): expectation-
+maximization over the learned prior's own measurement model.
+
+A robot team has scans of its wall, not its true shapes. Starting from a library whose classes
+give the vertex parametrization (the shipped one, or classes fitted on drawn or CAD shapes with
+``tools.fit_terrain_classes``), each iteration
+
+- E-step: conditions every class on every scan (``learned_prior.condition_class``: Gauss-Newton
+  in shape + calibration, the calibration marginalized), assigns the scan to its class of
+  largest evidence if that class explains at least the gate's fraction of the slice (a scan of
+  a wall no class describes teaches nothing and is left out), and keeps the posterior mean
+  ``m_i`` and covariance ``C_i`` of its vertices;
+- M-step: per class with at least ``min_scans`` scans, ``mu = mean(m_i)`` and
+  ``Sigma = mean((m_i - mu)(m_i - mu)^T + C_i)`` (the Gaussian EM update: the posterior
+  covariance keeps what one scan cannot see, e.g. hidden faces, in the class), truncated as
+  ``fit_class`` truncates (``variance_kept``, isotropic floor).
+
+The starting classes are widened by ``init_floor_m`` (10 mm) of isotropic std: a template
+fitted on a few shapes is too narrow, and the E-step's posterior means can only move where the
+class has variance (measured, 8 train truths per class as the template, 100 rendered scans per
+class, 4 iterations: held-out vertex coverage 0.22 without widening and with ``fit_class``'s
+truncation, 0.950 with both changes; the 400-truth fit scores 0.950). The M-step keeps every
+direction (``variance_kept`` 1.0: with the truncation the evidence fell after 3-4
+iterations). What no scan sees (hidden faces) keeps the starting variance: the template decides
+it, widened.
+
+Decisions: hard assignment (a scan's evidence margin between classes is tens of nats on the
+mock's images, soft weights would be 0 or 1); the E-step's Laplace posterior is the
+linearization the node uses, so the refit class is the one the node's conditioning is
+consistent with; the gate of the result is refitted separately (``tools.fit_terrain_classes``
+measures it on rendered scans; for scans alone the refit keeps the input library's gate).
+The total log evidence of the assigned scans is reported per iteration; EM raises it up to the
+Laplace approximation's error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import PerceptionConfig
+from .learned_prior import (
+    FLOOR_M,
+    SliceRays,
+    TerrainClass,
+    TerrainLibrary,
+    class_from_moments,
+    condition_class,
+)
+
+INIT_FLOOR_M = 0.01  # isotropic std added to the starting classes, metres
+
+
+@dataclass(frozen=True)
+class RefitIteration:
+    """One EM iteration: scans assigned per class (-1: left out), the total log evidence of the
+    assigned scans under the library the iteration started from."""
+
+    assigned: np.ndarray  # (S,) class index per scan, -1 when no class passed the gate
+    log_evidence: float
+
+
+def refit_library(
+    library: TerrainLibrary,
+    scans: Sequence[SliceRays],
+    config: PerceptionConfig,
+    iterations: int = 5,
+    min_scans: int = 5,
+    min_inlier_fraction: float = 0.9,
+    init_floor_m: float = INIT_FLOOR_M,
+    variance_kept: float = 1.0,
+    floor_m: float = FLOOR_M,
+) -> tuple[TerrainLibrary, list[RefitIteration]]:
+    """``library`` refitted on ``scans`` by ``iterations`` EM steps (module docstring): scans
+    whose best class explains less than ``min_inlier_fraction`` of the slice are left out; the
+    classes are widened by ``init_floor_m`` first. The result keeps ``library``'s gate."""
+    if iterations < 1 or min_scans < 2:
+        raise ValueError(f"need iterations >= 1 and min_scans >= 2, got {iterations}, {min_scans}")
+    if not (0.0 <= min_inlier_fraction <= 1.0 and init_floor_m >= 0.0):
+        raise ValueError(
+            f"need min_inlier_fraction in [0, 1] and init_floor_m >= 0, got "
+            f"{min_inlier_fraction}, {init_floor_m}"
+        )
+    gate = library.min_inlier_fraction
+    library = TerrainLibrary(tuple(_widened(c, init_floor_m) for c in library.classes), gate)
+    history = []
+    for _ in range(iterations):
+        assigned = np.full(len(scans), -1)
+        moments: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in library.classes]
+        total = 0.0
+        for s, rays in enumerate(scans):
+            fits = [condition_class(c, rays, config) for c in library.classes]
+            best = int(np.argmax([f.log_evidence for f in fits]))
+            if fits[best].inlier_fraction < min_inlier_fraction:
+                continue
+            assigned[s] = best
+            total += fits[best].log_evidence
+            moments[best].append((fits[best].prior.mean, fits[best].covariance))
+        history.append(RefitIteration(assigned, total))
+        classes = []
+        for terrain, kept in zip(library.classes, moments, strict=True):
+            if len(kept) < min_scans:
+                classes.append(terrain)
+                continue
+            means = np.stack([m for m, _ in kept])
+            mu = means.mean(axis=0)
+            dev = means - mu
+            sigma = dev.T @ dev / len(kept) + np.mean([c for _, c in kept], axis=0)
+            classes.append(class_from_moments(terrain, mu, sigma, variance_kept, floor_m))
+        library = TerrainLibrary(tuple(classes), gate)
+    return library, history
+
+
+def _widened(terrain: TerrainClass, floor_m: float) -> TerrainClass:
+    """``terrain`` with ``floor_m`` of isotropic std added to every coordinate."""
+    if floor_m == 0.0:
+        return terrain
+    extra = floor_m * np.eye(terrain.basis.shape[0])
+    basis = np.hstack([terrain.basis, extra])
+    return TerrainClass(terrain.name, terrain.mean, basis, terrain.closed, terrain.friction)
