@@ -211,6 +211,14 @@ def test_attempt_calibration_scores_only_executed_attempts():
     assert cal["ece"] == pytest.approx(ece)
     attempts = ([0.15, 0.95, 0.15, 0.12, 1.0], [0, 1, 0, 0, 0])
     assert cal["spiegelhalter_z"] == pytest.approx(calibration.spiegelhalter_z(*attempts))
+    # episodes without an instance are three truths; two on one truth are one group
+    truths = [0, 0, 1, 1, 2]
+    z = calibration.clustered_spiegelhalter_z(*attempts, truths)
+    assert cal["spiegelhalter_z_by_truth"] == pytest.approx(z) and cal["truths"] == 3
+    same = [{**e, "instance": 4} for e in episodes[:2]] + episodes[2:]
+    (cal,) = docking.attempt_calibration([{**row, "episodes": same}])
+    z = calibration.clustered_spiegelhalter_z(*attempts, [0, 0, 0, 0, 2])
+    assert cal["spiegelhalter_z_by_truth"] == pytest.approx(z) and cal["truths"] == 2
 
 
 def test_reliability_pngs_one_per_prior_and_mode(tmp_path):

@@ -446,18 +446,25 @@ def _attempts(episode: dict) -> tuple[np.ndarray, np.ndarray]:
     return predicted, docked
 
 
-def attempts_by_group(results: list[dict]) -> dict[tuple, tuple[np.ndarray, np.ndarray]]:
-    """(prior, mode, strategy) -> (predicted P_dock, docked) of the executed attempts, problems
-    pooled; groups without an executed attempt are left out."""
-    groups: dict[tuple, list[dict]] = {}
+def attempts_by_group(results: list[dict]) -> dict[tuple, tuple[np.ndarray, ...]]:
+    """(prior, mode, strategy) -> (predicted P_dock, docked, truth label) of the executed
+    attempts, problems pooled (the label: problem and instance, all episodes on one truth
+    share it; an episode without an instance is its own truth); groups without an executed
+    attempt are left out."""
+    groups: dict[tuple, list[tuple[str, dict]]] = {}
     for row in results:
-        groups.setdefault((row["prior"], row["mode"], row["strategy"]), []).extend(row["episodes"])
+        key = (row["prior"], row["mode"], row["strategy"])
+        for k, e in enumerate(row["episodes"]):
+            truth = f"{row.get('problem')}#{e.get('instance', f'episode {k}')}"
+            groups.setdefault(key, []).append((truth, e))
     out = {}
     for key, episodes in groups.items():
-        pairs = [_attempts(e) for e in episodes]  # a results row has at least one episode
-        predicted = np.concatenate([p for p, _ in pairs])
+        pairs = [(truth, *_attempts(e)) for truth, e in episodes]  # a row has an episode
+        predicted = np.concatenate([p for _, p, _ in pairs])
         if len(predicted):
-            out[key] = (predicted, np.concatenate([d for _, d in pairs]))
+            docked = np.concatenate([d for _, _, d in pairs])
+            truths = np.concatenate([[t] * len(p) for t, p, _ in pairs])
+            out[key] = (predicted, docked, truths)
     return out
 
 
@@ -465,10 +472,12 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
     """Per (prior, mode, strategy), problems pooled: attempts, mean predicted P_dock, fraction
     docked, Brier score (mean squared difference, lower is better), the expected calibration
     error (``calibration.ECE_BINS`` equal bins), Spiegelhalter's z (|z| > 1.96 rejects
-    calibration) and per bin of CALIBRATION_BINS (the last bin includes 1) the attempts, mean
-    prediction and docked fraction."""
+    calibration), the same z grouped by truth (``calibration.clustered_spiegelhalter_z``: the
+    test when ``--episode-seeds`` repeats each truth) and per bin of CALIBRATION_BINS (the last
+    bin includes 1) the attempts, mean prediction and docked fraction."""
     out = []
-    for (prior, mode, strategy), (predicted, docked) in attempts_by_group(results).items():
+    for (prior, mode, strategy), arrays in attempts_by_group(results).items():
+        predicted, docked, truths = arrays
         which = np.clip(np.digitize(predicted, CALIBRATION_BINS) - 1, 0, len(CALIBRATION_BINS) - 2)
         bins = [
             {
@@ -492,6 +501,10 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
                 "brier": float(np.mean((predicted - docked) ** 2)),
                 "ece": calibration.expected_calibration_error(predicted, docked),
                 "spiegelhalter_z": calibration.spiegelhalter_z(predicted, docked),
+                "spiegelhalter_z_by_truth": calibration.clustered_spiegelhalter_z(
+                    predicted, docked, truths
+                ),
+                "truths": len(np.unique(truths)),
                 "bins": bins,
             }
         )
@@ -502,7 +515,7 @@ def write_reliability_pngs(results: list[dict], folder: Path) -> list[Path]:
     """One reliability diagram per (prior, mode), a series per strategy; the paths written."""
     by_plot: dict[tuple, dict] = {}
     for (prior, mode, strategy), arrays in attempts_by_group(results).items():
-        by_plot.setdefault((prior, mode), {})[strategy] = arrays
+        by_plot.setdefault((prior, mode), {})[strategy] = arrays[:2]
     paths = []
     for (prior, mode), series in by_plot.items():
         path = Path(folder) / f"reliability_{prior}_{mode}.png"
@@ -513,7 +526,7 @@ def write_reliability_pngs(results: list[dict], folder: Path) -> list[Path]:
 
 CALIBRATION_HEADER = (
     f"{'prior':7} {'mode':13} {'strategy':8} {'attempts':>8} {'predicted':>9} {'docked':>6} "
-    f"{'brier':>5} {'ECE':>5} {'z':>5}  bins"
+    f"{'brier':>5} {'ECE':>5} {'z':>5} {'z/truth':>7}  bins"
 )
 
 
@@ -526,7 +539,8 @@ def _calibration_line(row: dict) -> str:
     return (
         f"{row['prior']:7} {row['mode']:13} {row['strategy']:8} {row['attempts']:>8} "
         f"{row['predicted_mean']:>9.2f} {row['docked_fraction']:>6.2f} {row['brier']:>5.3f} "
-        f"{row['ece']:>5.3f} {row['spiegelhalter_z']:>5.2f}  {bins}"
+        f"{row['ece']:>5.3f} {row['spiegelhalter_z']:>5.2f} "
+        f"{row['spiegelhalter_z_by_truth']:>7.2f}  {bins}"
     )
 
 
