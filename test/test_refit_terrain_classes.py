@@ -60,12 +60,16 @@ def test_em_pulls_a_displaced_template_back_to_the_walls_the_scans_see():
             for c in shipped.classes
         )
     )
-    refitted, history = refit_library(
+    refit = refit_library(
         template, rays, config, iterations=2, min_scans=3, min_inlier_fraction=0.5
     )
-    assert len(history) == 2 and history[1].log_evidence > history[0].log_evidence
-    assert list(history[-1].assigned[-2:]) == [-1, -1]
-    assert list(history[-1].assigned[:-2]) == [k for k in range(3) for _ in range(6)]
+    evidence = [step.log_evidence for step in refit.steps]
+    assert len(evidence) == 3 and evidence[1] > evidence[0]  # the widened template: step 0
+    assert refit.kept == int(np.argmax(evidence)) > 0
+    refitted = refit.library
+    for step in refit.steps:
+        assert list(step.assigned[-2:]) == [-1, -1]
+        assert list(step.assigned[:-2]) == [k for k in range(3) for _ in range(6)]
     for start, after in zip(template.classes, refitted.classes, strict=True):
         target = np.mean(truths[start.name], axis=0)
         error = [np.sqrt(np.mean((c.mean - target) ** 2)) for c in (start, after)]
@@ -86,9 +90,9 @@ def test_refit_argument_checks_and_widening():
     np.testing.assert_allclose(wide.covariance, terrain.covariance + 1e-4 * np.eye(24))
     assert _widened(terrain, 0.0) is terrain
     # classes with too few scans are kept as they were (widened), not refitted from nothing
-    kept, history = refit_library(library, [], config, iterations=1, init_floor_m=0.0)
-    assert history[0].assigned.size == 0
-    for a, b in zip(library.classes, kept.classes, strict=True):
+    refit = refit_library(library, [], config, iterations=1, init_floor_m=0.0)
+    assert refit.steps[0].assigned.size == 0
+    for a, b in zip(library.classes, refit.library.classes, strict=True):
         np.testing.assert_array_equal(a.basis, b.basis)
 
 
@@ -103,6 +107,7 @@ def test_tool_writes_a_gated_library_the_node_loads(scans, tmp_path, capsys):
     assert 0.0 < library.min_inlier_fraction < 1.0
     printed = capsys.readouterr().out
     assert "21 of 21 scans give a slice" in printed and "3 left out" in printed
+    assert printed.count("(kept)") == 1
     assert "min_inlier_fraction" in printed
 
 

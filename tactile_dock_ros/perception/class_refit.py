@@ -29,8 +29,8 @@ mock's images, soft weights would be 0 or 1); the E-step's Laplace posterior is 
 linearization the node uses, so the refit class is the one the node's conditioning is
 consistent with; the gate of the result is refitted separately (``tools.fit_terrain_classes``
 measures it on rendered scans; for scans alone the refit keeps the input library's gate).
-The total log evidence of the assigned scans is reported per iteration; EM raises it up to the
-Laplace approximation's error.
+The mean log evidence per assigned scan is reported per step; the library of the largest is
+kept.
 """
 
 from __future__ import annotations
@@ -55,27 +55,41 @@ INIT_FLOOR_M = 0.01  # isotropic std added to the starting classes, metres
 
 @dataclass(frozen=True)
 class RefitIteration:
-    """One EM iteration: scans assigned per class (-1: left out), the total log evidence of the
-    assigned scans under the library the iteration started from."""
+    """One E-step: the class index per scan (-1: left out) and the mean log evidence per
+    assigned scan, under the library of that step."""
 
     assigned: np.ndarray  # (S,) class index per scan, -1 when no class passed the gate
     log_evidence: float
+
+
+@dataclass(frozen=True)
+class Refit:
+    """Result of :func:`refit_library`: the library kept, the E-steps (``iterations + 1``: the
+    last scores the last M-step's library) and which step's library was kept (0: the widened
+    starting library)."""
+
+    library: TerrainLibrary
+    steps: tuple[RefitIteration, ...]
+    kept: int
 
 
 def refit_library(
     library: TerrainLibrary,
     scans: Sequence[SliceRays],
     config: PerceptionConfig,
-    iterations: int = 5,
+    iterations: int = 4,
     min_scans: int = 5,
     min_inlier_fraction: float = 0.9,
     init_floor_m: float = INIT_FLOOR_M,
     variance_kept: float = 1.0,
     floor_m: float = FLOOR_M,
-) -> tuple[TerrainLibrary, list[RefitIteration]]:
+) -> Refit:
     """``library`` refitted on ``scans`` by ``iterations`` EM steps (module docstring): scans
     whose best class explains less than ``min_inlier_fraction`` of the slice are left out; the
-    classes are widened by ``init_floor_m`` first. The result keeps ``library``'s gate."""
+    classes are widened by ``init_floor_m`` first. Of the libraries the steps went through, the
+    one of largest mean log evidence per assigned scan is kept (the Laplace E-step does not make
+    EM monotone: measured, the evidence fell at the fourth step). The result keeps
+    ``library``'s gate."""
     if iterations < 1 or min_scans < 2:
         raise ValueError(f"need iterations >= 1 and min_scans >= 2, got {iterations}, {min_scans}")
     if not (0.0 <= min_inlier_fraction <= 1.0 and init_floor_m >= 0.0):
@@ -84,23 +98,26 @@ def refit_library(
             f"{min_inlier_fraction}, {init_floor_m}"
         )
     gate = library.min_inlier_fraction
-    library = TerrainLibrary(tuple(_widened(c, init_floor_m) for c in library.classes), gate)
-    history = []
-    for _ in range(iterations):
+    libraries = [TerrainLibrary(tuple(_widened(c, init_floor_m) for c in library.classes), gate)]
+    steps = []
+    for step in range(iterations + 1):
+        current = libraries[-1]
         assigned = np.full(len(scans), -1)
-        moments: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in library.classes]
-        total = 0.0
+        moments: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in current.classes]
+        evidence = []
         for s, rays in enumerate(scans):
-            fits = [condition_class(c, rays, config) for c in library.classes]
+            fits = [condition_class(c, rays, config) for c in current.classes]
             best = int(np.argmax([f.log_evidence for f in fits]))
             if fits[best].inlier_fraction < min_inlier_fraction:
                 continue
             assigned[s] = best
-            total += fits[best].log_evidence
+            evidence.append(fits[best].log_evidence)
             moments[best].append((fits[best].prior.mean, fits[best].covariance))
-        history.append(RefitIteration(assigned, total))
+        steps.append(RefitIteration(assigned, float(np.mean(evidence)) if evidence else -np.inf))
+        if step == iterations:
+            break
         classes = []
-        for terrain, kept in zip(library.classes, moments, strict=True):
+        for terrain, kept in zip(current.classes, moments, strict=True):
             if len(kept) < min_scans:
                 classes.append(terrain)
                 continue
@@ -109,8 +126,9 @@ def refit_library(
             dev = means - mu
             sigma = dev.T @ dev / len(kept) + np.mean([c for _, c in kept], axis=0)
             classes.append(class_from_moments(terrain, mu, sigma, variance_kept, floor_m))
-        library = TerrainLibrary(tuple(classes), gate)
-    return library, history
+        libraries.append(TerrainLibrary(tuple(classes), gate))
+    kept = int(np.argmax([s.log_evidence for s in steps]))
+    return Refit(libraries[kept], tuple(steps), kept)
 
 
 def _widened(terrain: TerrainClass, floor_m: float) -> TerrainClass:

@@ -75,7 +75,7 @@ def run(args) -> TerrainLibrary | None:
     print(f"{len(scans)} of {len(files)} scans give a slice ({len(skipped)} skipped)", flush=True)
     if len(scans) < args.min_scans:
         raise InputError(f"{len(scans)} scans with a slice, need at least {args.min_scans}")
-    refitted, history = refit_library(
+    refit = refit_library(
         library,
         scans,
         config,
@@ -84,15 +84,18 @@ def run(args) -> TerrainLibrary | None:
         args.min_inlier_fraction,
         args.init_floor_mm / 1000,
     )
-    for i, step in enumerate(history):
+    for i, step in enumerate(refit.steps):
         counts = {c.name: int(np.sum(step.assigned == k)) for k, c in enumerate(library.classes)}
         left = int(np.sum(step.assigned < 0))
         print(
-            f"iteration {i + 1}: scans per class {counts}, {left} left out, "
-            f"log evidence {step.log_evidence:.1f}"
+            f"library after {i} iterations: scans per class {counts}, {left} left out, "
+            f"mean log evidence per scan {step.log_evidence:.2f}"
+            + (" (kept)" if i == refit.kept else "")
         )
-    last = history[-1].assigned
-    labelled = [(r, library.classes[k].name) for r, k in zip(scans, last, strict=True) if k >= 0]
+    assigned = refit.steps[refit.kept].assigned
+    names = [c.name for c in library.classes]
+    labelled = [(r, names[k]) for r, k in zip(scans, assigned, strict=True) if k >= 0]
+    refitted = refit.library
     inside, outside = inlier_samples(refitted, labelled, config)
     if inside.size == 0:
         raise InputError(f"no scan passed --min-inlier-fraction {args.min_inlier_fraction}")
