@@ -8,6 +8,7 @@ import pytest
 
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
+from tactile_dock_ros.core.sampling import Deferral
 
 
 def _evidence(rows: int, x: float = 0.0) -> History:
@@ -63,6 +64,20 @@ def test_sampled_sets_the_warm_start_and_the_dropped_rows():
     assert state.record(_evidence(1), 2).dropped.tolist() == [2]  # still row 2 of the longer
     assert state.sampled(np.zeros((0, 2))).warm_start is None  # no rows: sample cold
     assert state.sampled().dropped.tolist() == []
+
+
+def test_deferred_rows_are_kept_with_the_state_and_ignored_with_the_dropped_ones():
+    deferral = Deferral([0, 2], [1, 3], np.ones((4, 2)))
+    state = EpisodeState().record(_evidence(3), 1).sampled(np.ones((5, 2)), [1], deferral)
+    assert state.deferred.tolist() == [0, 2] and state.ignored.tolist() == [0, 1, 2]
+    later = state.record(_evidence(1), 2)  # the rows still index the older ones
+    assert later.deferral is deferral and later.ignored.tolist() == [0, 1, 2]
+    assert later.with_history(_evidence(1), [3]).deferred.tolist() == []
+    assert state.sampled().deferred.tolist() == [] and EpisodeState().ignored.tolist() == []
+    with pytest.raises(ValueError, match="deferred rows"):
+        EpisodeState(_evidence(2), deferral=Deferral([2], [1]))
+    with pytest.raises(ValueError, match="effort"):
+        Deferral([0, 1], [1])
 
 
 def test_with_history_replaces_the_evidence_and_clears_the_dropped_rows():

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .history import History
+from .sampling import Deferral
 
 OBJECTIVES = ("ours", "greedy", "window", "info_gain")  # planner.score
 
@@ -48,7 +49,11 @@ class EpisodeState:
         move_ids: (k,) the move (plan id, from 1; 0 unknown) that observed each history row;
             default: all unknown.
         dropped: history rows the newest posterior ignored as inconsistent
-            (``PosteriorSamples.dropped``, ``ShapeSamples.dropped_segments``).
+            (``PosteriorSamples.dropped``; ``ShapeSamples.dropped_segments`` carries these and
+            the deferred ones).
+        deferral: the history rows the newest posterior left out while their seed search goes
+            on, not judged yet (``sampling.Deferral``; the next sampling tries them again);
+            None: none. ``deferred``: its rows; ``ignored``: dropped and deferred rows.
         targets: (p, 2) aim points of the earlier DOCK plans, metres (eq. 24's P').
         tool: (2,) current tool position in the plane, metres; None while unknown.
         warm_start: (N, m) the previous posterior in z (``sample_posterior(init_z=...)``);
@@ -61,6 +66,7 @@ class EpisodeState:
     targets: np.ndarray = ()
     tool: np.ndarray | None = None
     warm_start: np.ndarray | None = None
+    deferral: Deferral | None = None
 
     def __post_init__(self) -> None:
         k = len(self.history)
@@ -74,10 +80,10 @@ class EpisodeState:
             raise ValueError(f"move_ids has {len(values['move_ids'])} entries for {k} rows")
         if np.any(values["move_ids"] < 0):
             raise ValueError(f"move ids must be >= 0, got {values['move_ids'].tolist()}")
-        if np.any((values["dropped"] < 0) | (values["dropped"] >= k)):
-            raise ValueError(
-                f"dropped rows {values['dropped'].tolist()} outside the {k}-row history"
-            )
+        deferred = np.zeros(0, int) if self.deferral is None else self.deferral.rows
+        for rows, name in ((values["dropped"], "dropped"), (deferred, "deferred")):
+            if np.any((rows < 0) | (rows >= k)):
+                raise ValueError(f"{name} rows {rows.tolist()} outside the {k}-row history")
         if self.tool is not None:
             values["tool"] = _frozen(self.tool, float, (2,), "tool position")
         if self.warm_start is not None:
@@ -86,9 +92,21 @@ class EpisodeState:
         for name, value in values.items():
             object.__setattr__(self, name, value)
 
+    @property
+    def deferred(self) -> np.ndarray:
+        """History rows the newest posterior left out for now (``deferral.rows``)."""
+        return np.zeros(0, int) if self.deferral is None else self.deferral.rows
+
+    @property
+    def ignored(self) -> np.ndarray:
+        """History rows the newest posterior's samples need not satisfy: dropped and deferred
+        ones (the planner's slide check and retreat leave them out), sorted."""
+        return np.union1d(self.dropped, self.deferred).astype(int)
+
     def record(self, evidence: History, plan_id: int) -> EpisodeState:
         """The state with plan ``plan_id``'s evidence appended (plans record in order, ids from
-        1). The dropped rows stay valid (they index the older rows) until the next sampling."""
+        1). The dropped and deferred rows stay valid (they index the older rows) until the next
+        sampling."""
         newest = int(self.move_ids.max(initial=0))
         if int(plan_id) != plan_id or plan_id < 1 or plan_id <= newest:
             raise ValueError(f"plan id {plan_id} must be >= 1 and above the newest, {newest}")
@@ -99,14 +117,23 @@ class EpisodeState:
         )
 
     def with_history(self, history: History, move_ids) -> EpisodeState:
-        """The state with this whole history (a ContactHistory received); the dropped rows are
-        cleared since they indexed the previous one."""
-        return dataclasses.replace(self, history=history, move_ids=move_ids, dropped=())
+        """The state with this whole history (a ContactHistory received); the dropped and
+        deferred rows are cleared since they indexed the previous one."""
+        return dataclasses.replace(
+            self,
+            history=history,
+            move_ids=move_ids,
+            dropped=(),
+            deferral=None,
+        )
 
-    def sampled(self, z: np.ndarray | None = None, dropped=()) -> EpisodeState:
+    def sampled(
+        self, z: np.ndarray | None = None, dropped=(), deferral: Deferral | None = None
+    ) -> EpisodeState:
         """The state after sampling its posterior: ``z`` (N, m) the next warm start (None or
-        no rows: none), ``dropped`` the history rows the sampler ignored."""
-        return dataclasses.replace(self, warm_start=z, dropped=dropped)
+        no rows: none), ``dropped`` the history rows the sampler ignored as inconsistent,
+        ``deferral`` those it left out for now (``PosteriorSamples.deferral``)."""
+        return dataclasses.replace(self, warm_start=z, dropped=dropped, deferral=deferral)
 
     def aim(self, target) -> EpisodeState:
         """The state with a DOCK plan's aim point (2,) added to the targets (eq. 24)."""

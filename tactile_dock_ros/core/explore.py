@@ -45,6 +45,7 @@ class CycleLog:
     rejected: int  # posterior samples on which a recorded slide could not have happened
     history_length: int  # observations available when this cycle planned
     convergence: Convergence  # the sampler's between-chain check of this cycle's samples
+    deferred: int = 0  # observations the sampler left out while their seed search goes on
 
 
 @dataclass(frozen=True)
@@ -136,11 +137,12 @@ def run_episode(
                 method,
                 init_z=state.warm_start,
                 known_dropped=state.dropped,
+                deferral=state.deferral,  # rows set aside while their seed search goes on
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:
                 return _finish(state, log, "error", f"inference returned {len(post.z)} samples")
-            state = state.sampled(post.z, post.dropped)
+            state = state.sampled(post.z, post.dropped, post.deferral)
             objective = _objective(strategy, cycle)
             config = dataclasses.replace(config, objective=objective)
             decision = planner.plan(post.vertices, prior, state, config)
@@ -154,6 +156,7 @@ def run_episode(
                 inference_seconds=t1 - t0,
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
+                deferred=len(post.deferred),
                 rejected=decision.rejected,
                 history_length=len(state.history),
                 convergence=post.convergence,

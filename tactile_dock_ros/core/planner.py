@@ -137,13 +137,13 @@ def _lead(
     """The path's first part: ``start`` alone in free space, else a way out of the
     likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None.
 
-    Decision: when the sampler dropped an observation of the latest move, the estimate
-    contradicts where the tool just was (notch depth truth 7: it slid down the unseen back of
-    a hold, and every contact there was dropped), so the tool first leaves the way it came,
-    free or not.
+    Decision: when the sampler dropped (or deferred) an observation of the latest move, the
+    estimate contradicts where the tool just was (notch depth truth 7: it slid down the unseen
+    back of a hold, and every contact there was dropped), so the tool first leaves the way it
+    came, free or not.
     """
     newest = int(state.move_ids.max(initial=0))  # 0: rows of unknown moves (slides too)
-    if newest > 0 and np.isin(np.flatnonzero(state.move_ids == newest), state.dropped).any():
+    if newest > 0 and np.isin(np.flatnonzero(state.move_ids == newest), state.ignored).any():
         lead = retrace(state.history, start, space, step)
         if lead is not None:
             return lead
@@ -411,7 +411,7 @@ def plan(
             coefficient).
         state: the episode so far. The samples already satisfy each history row (eq. 13); the
             planner reads the history only for the slides: samples on which a recorded
-            compliant slide (``state.move_ids``; rows in ``state.dropped`` take no part) could
+            compliant slide (``state.move_ids``; rows in ``state.ignored`` take no part) could
             not have happened are dropped first (``slides.consistent_with_slides``;
             ``Plan.rejected`` counts them). Decision: if fewer than two pass (the moment fit
             needs two) all are kept; the count tells. The plan starts at ``state.tool`` and
@@ -433,7 +433,7 @@ def plan(
     start, load, friction = state.tool, np.asarray(config.load), shape.friction
     objective, compliant = config.objective, config.compliant
     keep = slides.consistent_with_slides(
-        samples, shape.closed, state.history, state.move_ids, load, friction, state.dropped
+        samples, shape.closed, state.history, state.move_ids, load, friction, state.ignored
     )
     rejected = int(len(keep) - keep.sum())
     samples = samples[keep] if keep.sum() >= 2 else samples

@@ -83,6 +83,8 @@ LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std 
 DESCENT_HALF_WIDTH = 3.0  # descent line scans: +- this many std (a seed, not a Gibbs draw)
 DESCENT_CANDIDATES = 32  # segments per descent step judged against every observation
 SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
+SEED_RESTARTS_DEFAULT = 8  # failed descent restarts on a row before it is dropped
+SEED_ROUND_RESTARTS = 1  # failed restarts per seed-search round of one call (then: deferred)
 SEED_MIN_DISTINCT = 3  # distinct seeds wanted (restart descents): one pocket holds < 1/2
 SEED_PRIOR_BATCH = 128  # prior draws tried as exact seeds before anything else
 SEED_PRIOR_DRAWS = 32  # prior draws per chain at most for exact seeds (acceptance >~ 3 %)
@@ -96,6 +98,37 @@ HMC_MIN_DURATION = 0.02  # rad: shortest adapted HMC move
 POSTERIOR_PRUNE_WIDEN = 2.0  # std factor of the warm rows' moment fit that prunes free pairs
 
 
+@dataclass(frozen=True, eq=False)
+class Deferral:
+    """History rows a failed seed search set aside, not judged yet (``sample_posterior``).
+
+    Attributes:
+        rows: (d,) history rows left out of the posterior while their seed search goes on.
+        effort: (d,) descent restarts run so far by the failed searches that left each violated.
+        starts: (s, m) descent starts (z rows) the search has not tried yet: the next call's
+            restarts begin from these, where this one stopped; None: none.
+    """
+
+    rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    effort: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    starts: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        rows = np.asarray(self.rows, dtype=int).reshape(-1)
+        effort = np.asarray(self.effort, dtype=int).reshape(-1)
+        if len(effort) != len(rows) or np.any(effort < 0):
+            raise ValueError(f"deferral effort {effort.tolist()} must be >= 0, one per row")
+        object.__setattr__(self, "rows", rows)
+        object.__setattr__(self, "effort", effort)
+        if self.starts is not None:
+            starts = np.asarray(self.starts, dtype=float)
+            starts = starts.reshape(len(starts), -1) if starts.size else None
+            object.__setattr__(self, "starts", starts)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
 @dataclass(frozen=True)
 class PosteriorSamples:
     """Samples of the posterior shape.
@@ -105,6 +138,9 @@ class PosteriorSamples:
         method: sampler name; ess: effective sample size (min over vertex coordinates);
         seconds: wall time including pruning and seeding.
         dropped: indices into the given history of observations ignored as inconsistent.
+        deferral: the observations left out of this call's posterior while their seed search
+            goes on (``Deferral``; not judged yet: the next call, given it, tries them again);
+            ``deferred`` their indices into the history, ``ignored`` dropped and deferred ones.
         info: sampler counters (steps, chains, pairs kept, acceptance, bounces, seeds, ...).
         convergence: between-chain checks and re-seeding (``core.convergence``); the default
             (R-hat nan, nothing trapped) for independent draws.
@@ -118,6 +154,17 @@ class PosteriorSamples:
     dropped: np.ndarray
     info: dict = field(default_factory=dict)
     convergence: Convergence = field(default_factory=Convergence)
+    deferral: Deferral = field(default_factory=Deferral)
+
+    @property
+    def deferred(self) -> np.ndarray:
+        """History rows left out for now (``deferral.rows``)."""
+        return self.deferral.rows
+
+    @property
+    def ignored(self) -> np.ndarray:
+        """History rows the samples need not satisfy: dropped and deferred ones, sorted."""
+        return np.union1d(self.dropped, self.deferred).astype(int)
 
     @property
     def est(self) -> float:
@@ -578,13 +625,31 @@ class _Seeds:
     system: HistoryConstraints | None  # the pruned constraints (with the pairs seeds missed)
     exact: np.ndarray  # (C,) seeds that are exact posterior draws (prior draws that fit)
     best_z: np.ndarray | None = None  # best state of failed descents (for dropping)
+    restarts: int = 0  # descent restarts run
+    untried: np.ndarray | None = None  # descent starts not tried (a failed search's)
     warm: int = 0  # distinct warm-start rows used
     distinct: int = 0  # distinct seeds
     screened: int = 0  # feasible descent seeds discarded as atypical (``_typical``)
 
 
-def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=None) -> _Seeds:
-    """Feasible seeds for the chains and the HistoryConstraints they were found on.
+def _seed(
+    shape,
+    history,
+    rng,
+    chains,
+    threshold,
+    restarts,
+    max_iters,
+    init_z=None,
+    give_up=None,
+    starts=None,
+) -> _Seeds:
+    """Feasible seeds for the chains and the HistoryConstraints they were found on; ``give_up``
+    (default ``restarts``): the search fails after that many restarts without any feasible
+    state (no descent seed, no exact or warm seed); once one is found, restarts go on up to
+    ``restarts`` for SEED_MIN_DISTINCT seeds as before. ``starts``: descent starts to try
+    before the rows of ``init_z`` (an earlier failed search's untried ones, ``Deferral``);
+    a failed search returns its own untried starts (``_Seeds.untried``).
 
     Decision (a seed in a feasible pocket of negligible mass traps every chain started from it;
     HMC never leaves a pocket, so a longer burn-in does not help):
@@ -636,13 +701,17 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             )
     if n_exact == chains:
         return _Seeds(pool, system, np.ones(chains, dtype=bool), distinct=chains)
+    if starts is not None and len(starts):
+        warm = np.vstack([starts, warm])  # where an earlier search stopped, first
     all_pairs = np.argwhere(np.ones((len(history), shape.n_edges), dtype=bool))
     full = HistoryConstraints(shape, history, all_pairs)
     best_z, best_count = None, np.inf
     tries = min(chains - len(pool), SEED_DESCENTS)
     found = np.zeros((0, shape.n_basis))  # feasible descent seeds so far
     good = found
+    ran = 0
     for attempt in range(restarts):
+        ran += 1
         start = warm[attempt * tries : (attempt + 1) * tries]
         if len(start) < tries:  # previous-posterior rows first: they already fit most rows
             start = np.vstack([start, shape.sample_z(rng, tries - len(start))])
@@ -669,6 +738,8 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             )
             if full_count.min() < best_count:
                 best_count, best_z = full_count.min(), z[np.argmin(full_count)]
+        if give_up is not None and ran >= give_up and not len(found) and not len(pool):
+            break  # no feasible state at all yet: this round's search has failed
     warm_used = len(pool) - n_exact
     if len(good):
         fill = good[np.arange(chains - len(pool)) % len(good)]
@@ -679,11 +750,17 @@ def _seed(shape, history, rng, chains, threshold, restarts, max_iters, init_z=No
             warm=warm_used,
             distinct=len(pool) + len(good),
             screened=len(found) - len(good),
+            restarts=ran,
         )
     if len(pool):  # descent failed, but some chains have exact or warm seeds: share those
         share = np.arange(chains) % len(pool)
-        return _Seeds(pool[share], system, share < n_exact, warm=warm_used, distinct=len(pool))
-    return _Seeds(None, None, np.zeros(chains, dtype=bool), best_z=best_z)
+        return _Seeds(
+            pool[share], system, share < n_exact, warm=warm_used, distinct=len(pool), restarts=ran
+        )
+    untried = warm[ran * tries :][: SEED_DESCENTS * SEED_RESTARTS_DEFAULT]  # enough for a row
+    return _Seeds(
+        None, None, np.zeros(chains, dtype=bool), best_z=best_z, restarts=ran, untried=untried
+    )
 
 
 def _stalled(counts, per_chain: int, full_elsewhere: int = 0) -> bool:
@@ -872,7 +949,7 @@ def _reseed_trapped(run, draws, last, exact, rng):
     return draws, report
 
 
-def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
+def _prior_draws(shape, n_samples, rng, method, start, dropped, info, deferral=None):
     z = shape.sample_z(rng, n_samples)
     return PosteriorSamples(
         z,
@@ -882,7 +959,16 @@ def _prior_draws(shape, n_samples, rng, method, start, dropped, info):
         time.perf_counter() - start,
         dropped,
         info,
+        deferral=Deferral() if deferral is None else deferral,
     )
+
+
+def _deferral(set_aside: dict[int, int], starts) -> Deferral:
+    """The Deferral of ``{row: restarts spent}`` (rows sorted) with untried ``starts``."""
+    rows = sorted(set_aside)
+    if not rows:
+        return Deferral()
+    return Deferral(np.array(rows, int), np.array([set_aside[r] for r in rows], int), starts)
 
 
 def _rejection(shape, history, n_samples, rng, max_draws, batch):
@@ -911,10 +997,12 @@ def sample_posterior(
     mh_scale: float | None = None,
     max_steps: int | None = None,
     max_draws: int = 2_000_000,
-    seed_restarts: int = 8,
+    seed_restarts: int = SEED_RESTARTS_DEFAULT,
     seed_iters: int = 60,
     init_z: np.ndarray | None = None,
     known_dropped=(),
+    deferral: Deferral | None = None,
+    seed_round_restarts: int = SEED_ROUND_RESTARTS,
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -926,13 +1014,16 @@ def sample_posterior(
     draws that fit the history or from seeds found by random descent of f_H (``_seed``); after
     the run, chains trapped away from the others - the group with clearly less posterior mass
     when the chains split (``_trapped_and_sources``) - are re-seeded and rerun, and split R-hat
-    is checked (``convergence``, logged as a warning when the chains disagree). If
-    ``seed_restarts`` descents all fail, the history is taken as inconsistent (sensor error):
-    the observations violated by the best state found are dropped (``dropped``) and sampling
-    continues without them, round after round until the rest is consistent (each round drops
-    at least one row; a depth prior with an open slice end needed more than three on sloper
-    truth 2). Every returned sample satisfies every kept observation under the
-    exact geometric test. An empty history returns exact prior draws. ``max_steps`` (default
+    is checked (``convergence``, logged as a warning when the chains disagree). A seed search
+    that fails marks the history as possibly inconsistent (sensor error): the observations
+    violated by the best state found are set aside and sampling continues without them, round
+    after round until the rest fits (each round sets aside at least one row; a depth prior
+    with an open slice end needed more than three on sloper truth 2). A row set aside is
+    ``dropped`` (judged inconsistent) once the failed searches that left it violated have run
+    ``seed_restarts`` descent restarts in all, over this call and earlier ones; until then it
+    is ``deferred``. Each round runs at most ``seed_round_restarts`` restarts. Every returned
+    sample satisfies every observation that is neither dropped nor deferred under the exact
+    geometric test. An empty history returns exact prior draws. ``max_steps`` (default
     50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
     verification keeps failing.
 
@@ -942,6 +1033,23 @@ def sample_posterior(
     search (8 descent restarts) every cycle: sloper truth 5, depth prior, spent 30 of 33 s of
     sampling there, dropping the same row each time.
 
+    ``deferral``: the previous call's ``deferral``: its rows are tried again (the first
+    round's history holds them), their effort carries on and the first round's descents
+    start from its untried starts. Decision (2026-11-28): the drop decision is spread over
+    cycles. Judging a row took up to ``seed_restarts`` (8) restarts of 60 descent steps in one
+    call: 2.3-7 s of a cycle on the depth prior (sloper train truth 10, cycle 2: 21-37 rows).
+    Now a round gives up after ``seed_round_restarts`` (1) restarts that found no feasible
+    state (none exact or warm either), and the rows its best state violates are deferred:
+    left out of this call's posterior, tried again by the next call; each call adds the
+    restarts of its failed rounds to the rows they left violated, and a row is dropped when
+    its sum reaches ``seed_restarts`` (the one-call search's effort: never sooner). The next
+    call's descents start where this search stopped, from the starts it has not tried (the
+    posterior before the row came), not from the posterior without the row: on sloper train
+    truth 5 (episode seed 1, cycle 1, 25 rows, a row the one-call search fits at restart 8),
+    retries from the posterior without the row dropped it in 3 of 4 sampler seeds, retries
+    from the untried starts kept it in 4 of 4. A search that finds a feasible state in its
+    first restart, or has exact or warm seeds, runs as before, draw for draw;
+    ``seed_round_restarts=seed_restarts`` is the one-call search of before.
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
     observations, seeds the chains that exact seeds leave (``_seed``): its rows consistent with
     the history (the previous posterior filtered by the new observations, i.e. already draws
@@ -962,17 +1070,29 @@ def sample_posterior(
         init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
         if not np.all(np.isfinite(init_z)):
             raise ValueError("init_z must be finite")
+    if seed_restarts < 1 or seed_round_restarts < 1:
+        raise ValueError("seed_restarts and seed_round_restarts must be >= 1")
     n_samples = int(n_samples)
     dropped = np.unique(np.asarray(known_dropped, dtype=int).reshape(-1))
     if np.any((dropped < 0) | (dropped >= len(history))):
         raise ValueError(
             f"known_dropped rows {dropped.tolist()} outside the {len(history)}-row history"
         )
+    deferral = Deferral() if deferral is None else deferral
+    if np.any((deferral.rows < 0) | (deferral.rows >= len(history))):
+        raise ValueError(
+            f"deferred rows {deferral.rows.tolist()} outside the {len(history)}-row history"
+        )
+    effort = {
+        r: e
+        for r, e in zip(deferral.rows.tolist(), deferral.effort.tolist(), strict=True)
+        if r not in set(dropped.tolist())
+    }
     kept_idx = np.setdiff1d(np.arange(len(history)), dropped)
     info: dict = {"chains": chains if SAMPLERS[method].mcmc else 0}
     if len(history) == 0 or n_samples == 0:
-        return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-    if not SAMPLERS[method].mcmc:
+        return _prior_draws(shape, n_samples, rng, method, start, dropped, info, deferral)
+    if not SAMPLERS[method].mcmc:  # no seed search: deferred rows are simply kept
         kept = history.subset(kept_idx)
         z, stats = _rejection(shape, kept, n_samples, rng, max_draws, max(1024, 4 * n_samples))
         info.update(stats)
@@ -988,24 +1108,53 @@ def sample_posterior(
     if shape.n_basis == 0:
         raise ValueError("MCMC needs at least one basis column; use method='rejection'")
 
-    for _ in range(len(history) + 1):  # each round drops >= 1 row: then at most the prior
+    set_aside: dict[int, int] = {}  # rows deferred by this call -> restarts spent on them
+    info["seed_restarts"] = 0
+    give_up = min(seed_round_restarts, seed_restarts)
+    starts, untried = deferral.starts, None
+    retry = bool(effort)  # the first round holds deferred rows: it continues their search
+    for _ in range(len(history) + 1):  # each round sets >= 1 row aside: then at most the prior
         sub = history.subset(kept_idx)
         if len(sub) == 0:
             info["dropped_all"] = True
-            return _prior_draws(shape, n_samples, rng, method, start, dropped, info)
-        seeds = _seed(shape, sub, rng, chains, prune_threshold, seed_restarts, seed_iters, init_z)
+            left = _deferral(set_aside, untried)
+            return _prior_draws(shape, n_samples, rng, method, start, dropped, info, left)
+        seeds = _seed(
+            shape,
+            sub,
+            rng,
+            chains,
+            prune_threshold,
+            give_up if retry else seed_restarts,  # a retry: no top-up beyond its budget
+            seed_iters,
+            init_z,
+            give_up,
+            starts,
+        )
+        retry = False
+        info["seed_restarts"] += seeds.restarts
         if seeds.z is not None:
             break
+        info["seed_failed_restarts"] = info.get("seed_failed_restarts", 0) + seeds.restarts
+        if untried is None:  # the first failed round's: the search over the most rows
+            untried = seeds.untried
+        starts = None
         violated = (
             observation_violations(
                 shape.closed, shape.vertices(seeds.best_z[None]), sub, shape.friction
             )[0]
             > 0
         )
-        dropped = np.sort(np.concatenate([dropped, kept_idx[violated]]))
+        for row in kept_idx[violated].tolist():
+            spent = effort.get(row, 0) + seeds.restarts
+            if spent >= seed_restarts:
+                dropped = np.sort(np.append(dropped, row))
+            else:
+                set_aside[row] = spent
         kept_idx = kept_idx[~violated]
     else:
         raise RuntimeError("no history-consistent seed found even after dropping observations")
+    left = _deferral(set_aside, untried)
 
     per_chain = -(-n_samples // chains)
     warm = init_z is not None and seeds.warm + int(seeds.exact.sum()) >= chains
@@ -1044,5 +1193,13 @@ def sample_posterior(
         info["hmc_duration"] = float(np.median(durations))
         info["hmc_duration_range"] = (float(durations.min()), float(durations.max()))
     return PosteriorSamples(
-        z, vertices, method, ess, time.perf_counter() - start, dropped, info, convergence
+        z,
+        vertices,
+        method,
+        ess,
+        time.perf_counter() - start,
+        dropped,
+        info,
+        convergence,
+        left,
     )

@@ -334,6 +334,7 @@ class InferenceNode(Node):
                 method=self.p.method,
                 init_z=state.warm_start,  # warm start from the previous cycle's posterior
                 known_dropped=state.dropped,  # rows judged inconsistent stay out
+                deferral=state.deferral,  # rows set aside while their seed search goes on
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
@@ -342,7 +343,9 @@ class InferenceNode(Node):
             if generation != self.generation:
                 return  # the state changed while sampling: the newer trigger resamples
             if posterior is not None:
-                self.episode_state = state.sampled(posterior.z, posterior.dropped)
+                self.episode_state = state.sampled(
+                    posterior.z, posterior.dropped, posterior.deferral
+                )
         if posterior is not None and self.journal is not None:
             self.save_warm_start(episode, len(history), fingerprint, posterior)
         if posterior is None or len(posterior.vertices) < 2:
@@ -368,7 +371,7 @@ class InferenceNode(Node):
                 posterior.method,
                 posterior.ess,
                 len(history),
-                posterior.dropped,
+                posterior.ignored,  # the planner leaves dropped and deferred rows out alike
                 posterior.seconds,
                 hold_id,
             )
@@ -380,7 +383,8 @@ class InferenceNode(Node):
             f"episode {episode} cycle {cycle}: history {len(history)} segments, "
             f"{len(posterior.vertices)} {posterior.method} samples, ESS {posterior.ess:.1f}, "
             f"R-hat {posterior.convergence.rhat:.3f}, "
-            f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}"
+            f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}, "
+            f"deferred {len(posterior.deferred)}"
         )
         check = posterior.convergence
         if check.reseeded or not check.converged:

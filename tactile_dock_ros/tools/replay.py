@@ -182,7 +182,7 @@ def replan(cycle: Cycle, settings: Settings, fresh=None) -> planner.Plan:
     config = replace(settings.config, load=cycle.recorded.load, compliant=compliant)
     if fresh is None:
         return planner.plan(cycle.samples, cycle.prior, cycle.state, config)
-    state = cycle.state.sampled(dropped=fresh.dropped)
+    state = cycle.state.sampled(dropped=fresh.dropped, deferral=fresh.deferral)
     return planner.plan(fresh.vertices, cycle.prior, state, config)
 
 

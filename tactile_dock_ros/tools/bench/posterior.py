@@ -123,7 +123,7 @@ def _slide_consistent(view: explore.CycleView, shape, samples: np.ndarray) -> np
     state, config = view.state, view.config
     return slides.consistent_with_slides(
         samples, shape.closed, state.history, state.move_ids, config.load, shape.friction,
-        state.dropped,
+        state.ignored,
     )  # fmt: skip
 
 
@@ -148,7 +148,7 @@ def _repeats(
     return [
         sampling.sample_posterior(
             shape, state.history, len(view.samples), rng, method, init_z=warm_start,
-            known_dropped=state.dropped,
+            known_dropped=state.ignored,  # the rows the cycle's posterior left out
         )
         for _ in range(runs)
     ]  # fmt: skip
@@ -217,7 +217,7 @@ def compare(
     ``rejection_draws`` ``rejection_reference`` runs (raises TooFewAccepted). ``repeats``:
     more sampler runs (``_repeats``), scored alone and pooled."""
     state = view.state
-    kept = np.setdiff1d(np.arange(len(state.history)), state.dropped)
+    kept = np.setdiff1d(np.arange(len(state.history)), state.ignored)
     start = time.perf_counter()
     history = state.history.subset(kept)
     if rejection_draws is None:
@@ -247,6 +247,7 @@ def compare(
         "cycle": view.cycle,
         "history_rows": len(kept),
         "dropped_rows": len(state.dropped),
+        "deferred_rows": len(state.deferred),
         "reference_seconds": seconds,
         "reference_stages": [r.stages for r in refs],
         "log_evidence": [r.log_evidence for r in refs],
@@ -359,7 +360,7 @@ def run(args) -> dict:
     rows = []
     for cycle in wanted:
         state = views[cycle].state
-        rows_now = len(state.history) - len(state.dropped)  # kept rows, as ``compare`` counts
+        rows_now = len(state.history) - len(state.ignored)  # kept rows, as ``compare`` counts
         print(
             f"  cycle {cycle}: {args.references} {args.reference} runs of {particles} draws, "
             f"{rows_now} rows ...",
