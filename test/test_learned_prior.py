@@ -1,7 +1,6 @@
 """Learned terrain prior: class fitting, the library file, conditioning on a mock-camera image
 and the fitting tool."""
 
-from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -160,7 +159,6 @@ def test_tool_writes_a_loadable_library_from_train_truths_only(tmp_path, capsys)
     for c in library.classes:
         problem = problems.get(c.name)
         assert c.n_vertices == problem.prior.n_vertices and c.friction == problem.friction
-        assert 0.3 < c.posterior_scale < 5.0 and c.posterior_scale != 1.0  # fitted, not default
     assert "wrote" in capsys.readouterr().out
     # its truths are none of bench docking's (train or test) for the same seed
     ours = fit_terrain_classes.training_truths("notch", 30, 2)
@@ -183,55 +181,3 @@ def test_tool_rejects_bad_arguments(bad, tmp_path, capsys):
     assert exit_info.value.code == 2
     assert "error:" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
-
-
-def test_posterior_scale_widens_the_published_posterior_only():
-    config = PerceptionConfig.load(CONFIG)
-    cam = MockCamera()
-    terrain = TerrainLibrary.load(SHIPPED).get("notch")
-    truth = problems.get("notch").sample_ground_truth(np.random.default_rng(3))
-    rng = np.random.default_rng(4)
-    depth = cam.render(truth, config, draw_calibration_error(config.extrinsic, rng), rng)
-    rays = learned_prior.slice_rays(depth, cam.K, config)
-    plain = learned_prior.condition_class(replace(terrain, posterior_scale=1.0), rays, config)
-    wide = learned_prior.condition_class(replace(terrain, posterior_scale=2.0), rays, config)
-    np.testing.assert_array_equal(plain.prior.mean, wide.prior.mean)
-    np.testing.assert_allclose(wide.prior.basis, 2.0 * plain.prior.basis)
-    np.testing.assert_array_equal(plain.covariance, wide.covariance)  # the model's own
-    assert plain.log_evidence == wide.log_evidence
-    for bad in (0.0, -1.0, float("nan")):
-        with pytest.raises(ValueError, match="posterior_scale"):
-            replace(terrain, posterior_scale=bad)
-
-
-def test_fit_posterior_scale_recovers_the_factor_of_chi2_distances():
-    rng = np.random.default_rng(5)
-    for scale in (0.8, 1.0, 1.3):
-        distances = scale**2 * rng.chisquare(2, 20000)
-        assert learned_prior.fit_posterior_scale(distances) == pytest.approx(scale, rel=0.03)
-    with pytest.raises(ValueError):
-        learned_prior.fit_posterior_scale([])
-    with pytest.raises(ValueError):
-        learned_prior.fit_posterior_scale([1.0, np.inf])
-    # vertex_mahalanobis: per-vertex 2x2 blocks of the covariance
-    cov = np.diag([1.0, 4.0, 9.0, 1.0])
-    d = learned_prior.vertex_mahalanobis(np.zeros(4), cov, np.array([[1.0, 2.0], [3.0, 0.0]]))
-    np.testing.assert_allclose(d, [2.0, 1.0])
-
-
-def test_library_files_keep_the_posterior_scales(tmp_path):
-    library = _library()
-    scales = zip(library.classes, (0.9, 1.2), strict=True)
-    scaled = TerrainLibrary(tuple(replace(c, posterior_scale=s) for c, s in scales), 0.9)
-    scaled.save(tmp_path / "lib.npz")
-    assert [c.posterior_scale for c in TerrainLibrary.load(tmp_path / "lib.npz").classes] == [
-        0.9,
-        1.2,
-    ]
-    arrays = dict(np.load(tmp_path / "lib.npz"))
-    unscaled = {k: v for k, v in arrays.items() if not k.startswith("posterior_scale")}
-    np.savez(tmp_path / "old.npz", **unscaled)  # written before the scales: 1.0
-    assert [c.posterior_scale for c in TerrainLibrary.load(tmp_path / "old.npz").classes] == [
-        1.0,
-        1.0,
-    ]

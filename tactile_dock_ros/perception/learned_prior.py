@@ -38,10 +38,6 @@ Decisions.
 - Posterior: the shape block of ``(I + H^T W H)^-1`` pushed through ``A``, truncated by an
   eigendecomposition to ``keep`` of its trace; the calibration is marginalized out, because the
   truth is where the tool will touch, in the plane frame, whatever the camera's error was.
-  Its stds are then multiplied by the class's ``posterior_scale``: the linearized model's own
-  posterior is not exactly calibrated, and the factor that makes 95.4 % of training truth
-  vertices fall inside their vertex's 2-D 2-sigma ellipse is fitted with the classes
-  (:func:`fit_posterior_scale`), never on test truths.
 - :func:`condition` returns the best class whatever its fit; the out-of-library gate (the best
   class's inlier fraction against the library's ``min_inlier_fraction``, fitted on training
   scans by ``tools.fit_terrain_classes``) is ``perception.prior_select``.
@@ -81,8 +77,6 @@ class TerrainClass:
         basis: (2n, m) columns: scaled PCA directions, then the isotropic floor.
         closed: whether edge (n-1, 0) exists.
         friction: Coulomb friction coefficient of the class's surface.
-        posterior_scale: factor on the conditioned posterior's stds, fitted on training scans
-            (``fit_posterior_scale``; 1: none).
     """
 
     name: str
@@ -90,7 +84,6 @@ class TerrainClass:
     basis: np.ndarray
     closed: bool = False
     friction: float = 0.5
-    posterior_scale: float = 1.0
 
     def __post_init__(self) -> None:
         mean = np.asarray(self.mean, dtype=float)
@@ -105,15 +98,10 @@ class TerrainClass:
             raise ValueError(f"{self.name}: mean and basis must be finite")
         if not (np.isfinite(self.friction) and self.friction >= 0):
             raise ValueError(f"{self.name}: friction must be finite and >= 0, got {self.friction}")
-        if not (np.isfinite(self.posterior_scale) and self.posterior_scale > 0):
-            raise ValueError(
-                f"{self.name}: posterior_scale must be > 0, got {self.posterior_scale}"
-            )
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "basis", basis)
         object.__setattr__(self, "closed", bool(self.closed))
         object.__setattr__(self, "friction", float(self.friction))
-        object.__setattr__(self, "posterior_scale", float(self.posterior_scale))
 
     @property
     def n_vertices(self) -> int:
@@ -173,7 +161,6 @@ class TerrainLibrary:
             arrays[f"basis_{i}"] = c.basis
             arrays[f"closed_{i}"] = np.array(c.closed)
             arrays[f"friction_{i}"] = np.array(c.friction)
-            arrays[f"posterior_scale_{i}"] = np.array(c.posterior_scale)
         with open(path, "wb") as f:  # np.savez(path) would append .npz to other suffixes
             np.savez_compressed(f, **arrays)
 
@@ -206,7 +193,6 @@ class TerrainLibrary:
                     arrays[f"basis_{i}"],
                     bool(arrays[f"closed_{i}"]),
                     float(arrays[f"friction_{i}"]),
-                    float(arrays.get(f"posterior_scale_{i}", 1.0)),
                 )
                 for i, name in enumerate(names)
             )
@@ -366,8 +352,7 @@ class ClassFit:
     inliers: np.ndarray  # (k,) bool
     ray_log_evidence: np.ndarray  # (k,) per-bin log-likelihood at the estimate
     calibration: np.ndarray  # (r,) posterior mean of the calibration coordinates w
-    covariance: np.ndarray = field(repr=False)  # (2n, 2n) the model's posterior covariance of
-    # the vertices (``prior`` is it scaled by the class's ``posterior_scale``)
+    covariance: np.ndarray = field(repr=False)  # (2n, 2n) posterior covariance of the vertices
 
     @property
     def inlier_fraction(self) -> float:
@@ -444,7 +429,7 @@ def condition_class(
     values, vectors = np.linalg.eigh(cov)
     values, vectors = values[::-1].clip(0), vectors[:, ::-1]
     k = int(np.searchsorted(np.cumsum(values) / values.sum(), keep) + 1)
-    basis = vectors[:, :k] * (terrain.posterior_scale * np.sqrt(values[:k]))
+    basis = vectors[:, :k] * np.sqrt(values[:k])
     prior = GaussianShape(mean, basis, closed=terrain.closed, friction=terrain.friction)
     return ClassFit(terrain.name, prior, log_ev, inl, per_ray, v[m:].copy(), cov)
 
@@ -471,24 +456,3 @@ def condition_rays(
         key=lambda f: -f.log_evidence,
     )
     return LearnedPrior(fits[0], tuple(fits), rays)
-
-
-CHI2_2D_2SIGMA = float(-2.0 * np.log(1.0 - 0.954))  # a 2-D Gaussian's 2-sigma (95.4 %) ellipse
-
-
-def vertex_mahalanobis(mean: np.ndarray, covariance: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """(n,) squared Mahalanobis distance of each truth vertex from its mean vertex under the 2x2
-    block of ``covariance`` (2n, 2n) (same vertex order)."""
-    n = len(truth)
-    blocks = covariance.reshape(n, 2, n, 2)[np.arange(n), :, np.arange(n), :] + 1e-12 * np.eye(2)
-    error = np.asarray(truth, float) - np.asarray(mean, float).reshape(n, 2)
-    return np.einsum("ni,nij,nj->n", error, np.linalg.inv(blocks), error)
-
-
-def fit_posterior_scale(distances: np.ndarray) -> float:
-    """The factor on the posterior stds that puts 95.4 % of the vertices' squared Mahalanobis
-    ``distances`` (training truths, unscaled posteriors) inside the 2-sigma ellipse."""
-    d = np.asarray(distances, float)
-    if d.size == 0 or not np.all(np.isfinite(d)):
-        raise ValueError("need finite squared distances to fit a posterior scale")
-    return float(np.sqrt(max(np.quantile(d, 0.954), 1e-12) / CHI2_2D_2SIGMA))

@@ -18,33 +18,20 @@ truths per class (sub-stream ``GATE_STREAM``) are rendered by the mock camera wi
 ``--perception-config`` camera, a drawn calibration error and depth noise, and conditioned on
 the library (in-library) and on the library without their class (out-of-library);
 ``prior_select.fit_threshold`` turns the two inlier-fraction samples into
-``min_inlier_fraction``, stored in the library. Both samples' quantiles are printed. The same
-scans fit each class's ``posterior_scale`` (``learned_prior.fit_posterior_scale``: the factor on
-the conditioned posterior's stds that puts 95.4 % of their truth vertices inside the 2-sigma
-ellipse).
+``min_inlier_fraction``, stored in the library. Both samples' quantiles are printed.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..core import problems
 from ..perception.config import PerceptionConfig, PerceptionError
-from ..perception.learned_prior import (
-    FLOOR_M,
-    SliceRays,
-    TerrainLibrary,
-    condition_class,
-    fit_class,
-    fit_posterior_scale,
-    slice_rays,
-    vertex_mahalanobis,
-)
+from ..perception.learned_prior import FLOOR_M, TerrainLibrary, fit_class, slice_rays
 from ..perception.mock_camera import MockCamera, draw_calibration_error
 from ..perception.prior_select import fit_threshold, inlier_samples
 from . import package_files
@@ -89,11 +76,11 @@ def fit_library(
     return TerrainLibrary(tuple(classes))
 
 
-def rendered_scans(
+def gate_samples(
     library: TerrainLibrary, config: PerceptionConfig, scans: int, seed: int
-) -> list[tuple[SliceRays, str, np.ndarray]]:
-    """``(slice rays, class name, truth)`` of ``scans`` train truths per class rendered by the
-    mock camera (sub-stream ``GATE_STREAM``); scans that give no slice are skipped."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """``prior_select.inlier_samples`` of ``scans`` rendered train truths per class (sub-stream
+    ``GATE_STREAM``); scans that give no slice are skipped."""
     camera = MockCamera()
     base = split_seed("train", seed)
     rendered = []
@@ -104,30 +91,10 @@ def rendered_scans(
             rng = np.random.default_rng([*key, 2])
             depth = camera.render(truth, config, draw_calibration_error(config.extrinsic, rng), rng)
             try:
-                rendered.append((slice_rays(depth, camera.K, config), terrain.name, truth))
+                rendered.append((slice_rays(depth, camera.K, config), terrain.name))
             except PerceptionError:
                 continue
-    return rendered
-
-
-def gate_samples(
-    library: TerrainLibrary, config: PerceptionConfig, scans: int, seed: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``prior_select.inlier_samples`` of :func:`rendered_scans`."""
-    rendered = rendered_scans(library, config, scans, seed)
-    return inlier_samples(library, [(rays, name) for rays, name, _ in rendered], config)
-
-
-def posterior_scales(
-    library: TerrainLibrary, rendered: list[tuple[SliceRays, str, np.ndarray]], config
-) -> dict[str, float]:
-    """Per class, ``learned_prior.fit_posterior_scale`` of its rendered scans' truth vertices
-    under the class conditioned on the scan."""
-    distances: dict[str, list[np.ndarray]] = {name: [] for name in library.names}
-    for rays, name, truth in rendered:
-        fit = condition_class(library.get(name), rays, config)
-        distances[name].append(vertex_mahalanobis(fit.prior.mean, fit.covariance, truth))
-    return {n: fit_posterior_scale(np.concatenate(d)) for n, d in distances.items() if d}
+    return inlier_samples(library, rendered, config)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -199,33 +166,20 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, PerceptionError) as err:
         parser.error(f"--perception-config: {err}")
     library = fit_library(args.per_class, args.seed, args.variance_kept, args.floor_mm / 1000)
-    print(
-        f"fitting the gate and the posterior scales on {args.gate_scans} rendered train scans "
-        "per class ...",
-        flush=True,
-    )
-    rendered = rendered_scans(library, config, args.gate_scans, args.seed)
-    inside, outside = inlier_samples(library, [(r, n) for r, n, _ in rendered], config)
-    scales = posterior_scales(library, rendered, config)
+    print(f"fitting the gate on {args.gate_scans} rendered train scans per class ...", flush=True)
+    inside, outside = gate_samples(library, config, args.gate_scans, args.seed)
     if inside.size == 0:
         print(f"no scan gave a slice with {args.perception_config}: the camera does not see them")
         return 1
     gate = fit_threshold(inside, outside)
-    classes = (replace(c, posterior_scale=scales.get(c.name, 1.0)) for c in library.classes)
-    library = TerrainLibrary(tuple(classes), gate)
+    library = TerrainLibrary(library.classes, gate)
     library.save(args.out)
-    print(
-        f"{'class':13} {'vertices':>8} {'pca dirs':>8} {'floor mm':>8} {'rms std mm':>10} "
-        f"{'posterior scale':>15}"
-    )
+    print(f"{'class':13} {'vertices':>8} {'pca dirs':>8} {'floor mm':>8} {'rms std mm':>10}")
     for c in library.classes:
         floor = float(c.basis[0, -2 * c.n_vertices :].max(initial=0.0))
         pca = c.basis.shape[1] - 2 * c.n_vertices
         rms = float(np.sqrt(np.sum(c.basis**2) / c.basis.shape[0]))
-        print(
-            f"{c.name:13} {c.n_vertices:>8} {pca:>8} {floor * 1000:>8.3f} {rms * 1000:>10.2f} "
-            f"{c.posterior_scale:>15.3f}"
-        )
+        print(f"{c.name:13} {c.n_vertices:>8} {pca:>8} {floor * 1000:>8.3f} {rms * 1000:>10.2f}")
     print(f"inlier fraction, in library ({inside.size} scans):      {quantile_summary(inside)}")
     print(f"inlier fraction, out of library ({outside.size} scans): {quantile_summary(outside)}")
     print(f"min_inlier_fraction (the out-of-library gate): {gate:.3f}")

@@ -41,7 +41,7 @@ from ...core import problems
 from ...perception import evaluation, scenes
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.depth import decode_depth, encode_depth
-from ...perception.learned_prior import CHI2_2D_2SIGMA, TerrainLibrary, vertex_mahalanobis
+from ...perception.learned_prior import TerrainLibrary
 from ...perception.prior_select import select_prior
 from ...perception.render import render_depth
 from ...perception.terrain_prior import perceive
@@ -54,6 +54,7 @@ FOCAL_PX = 262.5
 COVERAGE_SPACING_M = 0.01
 TARGET_COVERAGE = (0.93, 0.99)
 MODELS = ("independent", "correlated")  # old, new
+CHI2_2D_2SIGMA = float(-2.0 * np.log(1.0 - 0.954))  # a 2-D Gaussian's 2-sigma (95.4 %) ellipse
 
 
 def add_arguments(parser) -> None:
@@ -131,8 +132,11 @@ def _image(truth, config: PerceptionConfig, K, encoding: str, seed, calibration_
 
 def vertex_coverage(prior, truth: np.ndarray) -> int:
     """Truth vertices inside their prior vertex's 2-D 2-sigma ellipse (same vertex order)."""
-    distances = vertex_mahalanobis(prior.mean, prior.basis @ prior.basis.T, truth)
-    return int(np.sum(distances <= CHI2_2D_2SIGMA))
+    n = prior.n_vertices
+    B = prior.basis.reshape(n, 2, -1)
+    S = B @ B.transpose(0, 2, 1) + 1e-12 * np.eye(2)
+    err = np.asarray(truth, float) - prior.mean_vertices
+    return int(np.sum(np.einsum("ni,nij,nj->n", err, np.linalg.inv(S), err) <= CHI2_2D_2SIGMA))
 
 
 def score_learned(depth, truth, kind: str, config, K, library: TerrainLibrary, seed) -> dict:
