@@ -35,7 +35,9 @@ def floor_bringup(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("floor")
     terrain = tmp / "floor.yaml"
     terrain.write_text(yaml.safe_dump(FLOOR))
-    arguments = {"profile": "mock", "terrain_file": str(terrain)}
+    # no camera: its floor images would reach the perception test's node, which runs while
+    # this module-scoped fixture does, on the same DDS domain
+    arguments = {"profile": "mock", "terrain_file": str(terrain), "perception_config": ""}
     with bringup.running(arguments, tmp, only={"executor", "mock_hardware"}) as processes:
         yield processes
 

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.dds
 
 
 def _logs(tmp_path) -> str:
-    return "\n".join(f"--- {p.name}\n{p.read_text()[-1500:]}" for p in tmp_path.glob("*.log"))
+    return "\n".join(f"--- {p.name}\n{p.read_text()[-1500:]}" for p in tmp_path.glob("*/*.log"))
 
 
 def _assert_resumed_with_the_whole_history(run: dict, tmp_path) -> None:
@@ -25,8 +25,20 @@ def _assert_resumed_with_the_whole_history(run: dict, tmp_path) -> None:
     assert run["history_after"] == run["history_expected"] >= run["history_before"] > 0, run
 
 
+def _run(node: str, tmp_path) -> dict:
+    """``restart_faults.run`` on the first of three terrains whose episode reaches a second
+    move (which one does depends on the episode's course, e.g. a give-up at cycle 2 when the
+    non-compliant slide leaves no site inside the workspace box)."""
+    for seed in (5, 6, 7):
+        try:
+            return restart_faults.run(node, tmp_path / f"seed_{seed}", seed)
+        except restart_faults.EndedBeforeFault as err:
+            ended = err
+    raise ended
+
+
 def test_a_killed_inference_node_restarts_with_the_full_history(tmp_path):
-    run = restart_faults.run("inference", tmp_path)
+    run = _run("inference", tmp_path)
     _assert_resumed_with_the_whole_history(run, tmp_path)
     # The attempt that ended while inference was down is in too (the latched reports).
     assert run["history_expected"] > run["history_before"], run
@@ -34,7 +46,7 @@ def test_a_killed_inference_node_restarts_with_the_full_history(tmp_path):
 
 
 def test_a_killed_planner_stops_the_arm_and_resumes_the_episode(tmp_path):
-    run = restart_faults.run("planner", tmp_path)
+    run = _run("planner", tmp_path)
     assert run["producer_lost"], run["stop_detail"]
     assert run["stopped"]  # zero commands from the stop to the restart
     # Stopped after producer_timeout without copies of the plan, plus a control tick and
