@@ -117,13 +117,14 @@ def test_inconsistent_history_drops_the_offending_observation(sloper_case):
     kept = np.setdiff1d(np.arange(len(bad)), out.dropped)
     assert history_consistent(False, out.vertices, bad.subset(kept), problem.friction).all()
     assert len(out.z) == 30
-    # by default one restart a round: the row waits, deferred, and is dropped by the call that
-    # brings its failed restarts to seed_restarts, its state passed on as the loop does
+    # the episode loops' one restart a round: the row waits, deferred, and is dropped by the
+    # call that brings its failed restarts to seed_restarts, its state passed on as they do
     rng, deferral, init_z = np.random.default_rng(5), None, None
     for call in range(3):
         out = sample_posterior(
-            problem.prior, bad, 30, rng, seed_restarts=3, init_z=init_z, deferral=deferral
-        )
+            problem.prior, bad, 30, rng, seed_restarts=3, init_z=init_z, deferral=deferral,
+            seed_round_restarts=sampling.SEED_ROUND_RESTARTS,
+        )  # fmt: skip
         kept = np.setdiff1d(np.arange(len(bad)), out.ignored)
         assert history_consistent(False, out.vertices, bad.subset(kept), problem.friction).all()
         assert len(out.z) == 30 and len(out.ignored) >= 1
@@ -681,17 +682,18 @@ def test_an_inconsistent_history_is_pruned_until_it_fits():
     state = json.loads(str(data["rng_state"]))  # the episode's, at that cycle
     rng = np.random.default_rng()
     rng.bit_generator.state = state
-    # by default each round gives up after one failed restart: rows are set aside, deferred
-    out = sample_posterior(prior, history, 100, rng, "hmc", init_z=data["init_z"])
+    # the episode loops' rounds give up after one failed restart: rows are set aside, deferred
+    out = sample_posterior(
+        prior, history, 100, rng, "hmc", init_z=data["init_z"],
+        seed_round_restarts=sampling.SEED_ROUND_RESTARTS,
+    )  # fmt: skip
     kept = history.subset(np.setdiff1d(np.arange(len(history)), out.ignored))
     assert len(out.z) == 100 and len(out.dropped) == 0 and 0 < len(out.deferred) < len(history)
     assert history_consistent(False, out.vertices, kept, prior.friction).all()
     assert out.info["seed_restarts"] <= len(out.deferred) + 8  # failed rounds: 1 restart each
-    # the one-call search (8 restarts a round) drops them, round after round
+    # the one-call search (the default: 8 restarts a round) drops them, round after round
     rng.bit_generator.state = state
-    out = sample_posterior(
-        prior, history, 100, rng, "hmc", init_z=data["init_z"], seed_round_restarts=8
-    )
+    out = sample_posterior(prior, history, 100, rng, "hmc", init_z=data["init_z"])
     kept = history.subset(np.setdiff1d(np.arange(len(history)), out.dropped))
     assert len(out.z) == 100 and 0 < len(out.dropped) < len(history) and len(out.deferred) == 0
     assert history_consistent(False, out.vertices, kept, prior.friction).all()
@@ -742,7 +744,10 @@ def test_a_row_the_seed_search_fits_late_is_deferred_then_kept():
     prior, history, rng, init_z = _sloper5_depth_case()
     deferral, z, deferred_once = None, init_z, False
     for _ in range(sampling.SEED_RESTARTS_DEFAULT):
-        out = sample_posterior(prior, history, 100, rng, init_z=z, deferral=deferral)
+        out = sample_posterior(
+            prior, history, 100, rng, init_z=z, deferral=deferral,
+            seed_round_restarts=sampling.SEED_ROUND_RESTARTS,
+        )  # fmt: skip
         assert len(out.dropped) == 0 and len(out.z) == 100
         kept = history.subset(np.setdiff1d(np.arange(len(history)), out.deferred))
         assert history_consistent(False, out.vertices, kept, prior.friction).all()
@@ -769,7 +774,10 @@ def test_an_inconsistent_row_is_dropped_after_the_one_call_searchs_effort(sloper
     bad = history.extend([mid + up], [mid - up], [Status.FREE])
     rng, deferral, z = np.random.default_rng(2), None, None
     for call in range(sampling.SEED_RESTARTS_DEFAULT):
-        out = sample_posterior(problem.prior, bad, 30, rng, init_z=z, deferral=deferral)
+        out = sample_posterior(
+            problem.prior, bad, 30, rng, init_z=z, deferral=deferral,
+            seed_round_restarts=sampling.SEED_ROUND_RESTARTS,
+        )  # fmt: skip
         assert out.info["seed_failed_restarts"] == 1  # the one-call search: 8 in one call
         kept = bad.subset(np.setdiff1d(np.arange(len(bad)), out.ignored))
         assert history_consistent(False, out.vertices, kept, problem.friction).all()

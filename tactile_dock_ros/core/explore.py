@@ -138,6 +138,7 @@ def run_episode(
                 init_z=state.warm_start,
                 known_dropped=state.dropped,
                 deferral=state.deferral,  # rows set aside while their seed search goes on
+                seed_round_restarts=sampling.SEED_ROUND_RESTARTS,  # the rest: next cycle
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:

@@ -1002,7 +1002,7 @@ def sample_posterior(
     init_z: np.ndarray | None = None,
     known_dropped=(),
     deferral: Deferral | None = None,
-    seed_round_restarts: int = SEED_ROUND_RESTARTS,
+    seed_round_restarts: int | None = None,
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -1049,7 +1049,9 @@ def sample_posterior(
     retries from the posterior without the row dropped it in 3 of 4 sampler seeds, retries
     from the untried starts kept it in 4 of 4. A search that finds a feasible state in its
     first restart, or has exact or warm seeds, runs as before, draw for draw;
-    ``seed_round_restarts=seed_restarts`` is the one-call search of before. Measured on
+    ``seed_round_restarts`` None (the default) is the one-call search of before, for callers
+    that do not call again (a one-off posterior, evaluations, checks); the episode loops
+    (``explore.run_episode``, the inference node) pass ``SEED_ROUND_RESTARTS``. Measured on
     ``bench docking --prior depth --split train --problems sloper`` (120 episodes, side by side
     with the code before): slowest cycle 5.65 -> 1.41 s, median 0.136 -> 0.133 s, the same
     docks and give-ups but one more (docs/inference.md, "Inconsistent history").
@@ -1073,6 +1075,8 @@ def sample_posterior(
         init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
         if not np.all(np.isfinite(init_z)):
             raise ValueError("init_z must be finite")
+    if seed_round_restarts is None:
+        seed_round_restarts = seed_restarts
     if seed_restarts < 1 or seed_round_restarts < 1:
         raise ValueError("seed_restarts and seed_round_restarts must be >= 1")
     n_samples = int(n_samples)

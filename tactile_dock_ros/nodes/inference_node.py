@@ -55,7 +55,7 @@ from tactile_dock_ros.core import descent_scan, hmc_exit
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.holds import ReceivedPriors
-from tactile_dock_ros.core.sampling import NODE_METHODS, sample_posterior
+from tactile_dock_ros.core.sampling import NODE_METHODS, SEED_ROUND_RESTARTS, sample_posterior
 from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.msg import (
     ContactHistory,
@@ -335,6 +335,7 @@ class InferenceNode(Node):
                 init_z=state.warm_start,  # warm start from the previous cycle's posterior
                 known_dropped=state.dropped,  # rows judged inconsistent stay out
                 deferral=state.deferral,  # rows set aside while their seed search goes on
+                seed_round_restarts=SEED_ROUND_RESTARTS,  # the rest: next cycle
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
