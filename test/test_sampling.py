@@ -737,32 +737,38 @@ def _sloper5_depth_case():
     return prior, history, rng, data["init_z"]
 
 
-def test_a_row_the_seed_search_fits_late_is_deferred_then_kept():
+def test_a_row_the_seed_search_fits_late_is_deferred_never_dropped_early():
     """The drop decision is spread over calls (cycles): a round gives up after one restart
-    with nothing feasible, so the call's seed effort is bounded, and the row waits, deferred;
-    the next calls retry it from the starts the search had not tried and keep it."""
+    with nothing feasible, so each call's seed effort is bounded, and the row waits, deferred,
+    retried by the next calls; it is dropped only once its failed restarts reach the one-call
+    search's 8. On this history (sloper train truth 5, depth prior) the one-call search fits
+    the row at its 8th restart on one machine and not at all under ``make test-perturbed``:
+    whether it is kept is the descents' coin, so only the invariants are asserted."""
     prior, history, rng, init_z = _sloper5_depth_case()
-    deferral, z, deferred_once = None, init_z, False
+    deferral, z, effort = None, init_z, {}
     for _ in range(sampling.SEED_RESTARTS_DEFAULT):
         out = sample_posterior(
             prior, history, 100, rng, init_z=z, deferral=deferral,
             seed_round_restarts=sampling.SEED_ROUND_RESTARTS,
         )  # fmt: skip
-        assert len(out.dropped) == 0 and len(out.z) == 100
-        kept = history.subset(np.setdiff1d(np.arange(len(history)), out.deferred))
+        assert len(out.z) == 100
+        kept = history.subset(np.setdiff1d(np.arange(len(history)), out.ignored))
         assert history_consistent(False, out.vertices, kept, prior.friction).all()
-        # at most one failed restart (one failed round), then the round without the deferred
+        # at most one failed restart (one failed round), then the round without the set-aside
         # rows; a retry that fits them runs one restart, no top-up for more distinct seeds
         assert out.info.get("seed_failed_restarts", 0) <= 1
-        if deferral is not None and len(deferral) and not len(out.deferred):
+        if deferral is not None and len(deferral) and not len(out.ignored):
             assert out.info["seed_restarts"] == 1
-        deferred_once |= len(out.deferred) > 0
         assert np.all(out.deferral.effort < sampling.SEED_RESTARTS_DEFAULT)
+        for row in out.dropped.tolist():  # never sooner than the one-call search's effort
+            assert effort.get(row, 0) + 1 == sampling.SEED_RESTARTS_DEFAULT, (row, effort)
+        effort = dict(zip(out.deferral.rows.tolist(), out.deferral.effort.tolist(), strict=True))
         deferral, z = out.deferral, out.z
         if not len(out.deferred):
             break
-    assert deferred_once and len(out.deferred) == 0  # fitted: kept, never dropped
-    assert history_consistent(False, out.vertices, history, prior.friction).all()
+    assert len(out.deferred) == 0  # within the one-call effort: fitted (kept) or dropped
+    kept = history.subset(np.setdiff1d(np.arange(len(history)), out.dropped))
+    assert history_consistent(False, out.vertices, kept, prior.friction).all()
 
 
 def test_an_inconsistent_row_is_dropped_after_the_one_call_searchs_effort(sloper_case):
