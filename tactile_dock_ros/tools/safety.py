@@ -508,6 +508,10 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
     the arm never moved (its plan aborted first), or whose stream never reached the probe, has
     ``latency_s`` None and an ``error`` (``stop_latency``)."""
     probe.spin_until(probe.sensors_flowing, 30.0)
+    samples = probe.rec.wrenches if stream == "wrench" else probe.rec.poses
+    # the probe's own subscription too: flowing to the executor is not flowing to the probe (a
+    # fresh-clone CI run dropped the wrench before the probe's subscription had matched)
+    probe.spin_until(lambda: len(samples) > 0, 10.0)
     tool = probe.tool(env)
     n_commands = len(probe.rec.commands)
     plan_id = probe.plan(traverse(tool, -0.5 if tool[0] > 0 else 0.5), speed=0.1)
@@ -517,7 +521,6 @@ def dropout(probe: Probe, env: Envelope, stream: str, delay_s: float) -> dict:
         return {"stream": stream, "latency_s": None, "moving_after_stop": 0, "outcome": None,
                 "detail": detail, "segments": None, "error": "the arm never moved"}  # fmt: skip
     probe.spin_until(lambda: False, delay_s)
-    samples = probe.rec.wrenches if stream == "wrench" else probe.rec.poses
     assert probe.drop(stream, True), f"drop_{stream} failed"
     report = probe.report(plan_id, timeout_s=10.0)
     # the zero command goes out just before the report, on another topic: the probe may take
