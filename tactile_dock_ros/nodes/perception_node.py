@@ -260,6 +260,7 @@ class PerceptionNode(Node):
             return
         source = f"depth {msg.width}x{msg.height}"
         values: list[KeyValue] = []
+        fell_back = False
         with Stopwatch() as watch:
             try:
                 if self.library is None:
@@ -268,11 +269,12 @@ class PerceptionNode(Node):
                     chosen = select_prior(depth, K, self.config, self.library, self.rng, self.gate)
                     prior, values = chosen.prior, learned_status(chosen)
                     source += f", {chosen.model} prior: {chosen.reason}"
+                    fell_back = chosen.model == "generic"
             except PerceptionError as err:
                 self.get_logger().warning(f"no prior from this frame: {err}")
                 return
         self.pending = False
-        if values and values[0].value == "generic":
+        if fell_back:
             self.get_logger().warning(f"prior from {source}")
         self.publish_prior(prior, source, watch.seconds, values)
 

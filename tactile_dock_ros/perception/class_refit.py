@@ -47,7 +47,7 @@ from .learned_prior import (
     TerrainClass,
     TerrainLibrary,
     class_from_moments,
-    condition_class,
+    condition_rays,
 )
 
 INIT_FLOOR_M = 0.01  # isotropic std added to the starting classes, metres
@@ -106,13 +106,13 @@ def refit_library(
         moments: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in current.classes]
         evidence = []
         for s, rays in enumerate(scans):
-            fits = [condition_class(c, rays, config) for c in current.classes]
-            best = int(np.argmax([f.log_evidence for f in fits]))
-            if fits[best].inlier_fraction < min_inlier_fraction:
+            fit = condition_rays(current, rays, config).best
+            if fit.inlier_fraction < min_inlier_fraction:
                 continue
+            best = current.names.index(fit.name)
             assigned[s] = best
-            evidence.append(fits[best].log_evidence)
-            moments[best].append((fits[best].prior.mean, fits[best].covariance))
+            evidence.append(fit.log_evidence)
+            moments[best].append((fit.prior.mean, fit.covariance))
         steps.append(RefitIteration(assigned, float(np.mean(evidence)) if evidence else -np.inf))
         if step == iterations:
             break

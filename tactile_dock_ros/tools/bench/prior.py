@@ -184,6 +184,12 @@ def score_terrain(
     """Both models' scores on one terrain ({"error": ...} when the camera makes no prior);
     ``seed``: an int, or a sequence (``terrain_seed``)."""
     depth, error = _image(truth, config, K, encoding, seed, calibration_scale)
+    return score_image(depth, error, truth, config, K, seed)
+
+
+def score_image(depth, error, truth, config: PerceptionConfig, K, seed) -> dict:
+    """``score_terrain`` on the image ``depth`` of ``truth`` seen with calibration error
+    ``error``."""
     out = {"calibration_error": error.tolist()}
     for model in MODELS:
         surface = dataclasses.replace(config.surface, depth_model=model)
@@ -272,13 +278,13 @@ def run(args) -> dict:
     base = split_seed(args.split, args.seed)
     for i, (label, truth) in enumerate(terrains(args.random, args.per_problem, base)):
         seed = terrain_seed(args.split, args.seed, i)
-        out = score_terrain(truth, config, K, args.encoding, seed, args.calibration_scale)
+        depth, error = _image(truth, config, K, args.encoding, seed, args.calibration_scale)
+        out = score_image(depth, error, truth, config, K, seed)
         if "error" in out:
             failed.append({"terrain": label, "error": out["error"]})
             continue
         kind = label.rsplit("_", 1)[0]
-        if library is not None:
-            depth, _ = _image(truth, config, K, args.encoding, seed, args.calibration_scale)
+        if library is not None:  # the same image
             out["learned"] = score_learned(depth, truth, kind, learned_config, K, library, seed)
         rows.append({"terrain": label, "kind": kind, **out})
     kinds = sorted({r["kind"] for r in rows})
