@@ -19,8 +19,8 @@ scans it explains best, leaving out scans whose best class explains less than
 then refitted on the same scans (``prior_select.inlier_samples``: each scan with the whole
 refitted library and without its class; ``prior_select.fit_threshold``) and stored in
 ``--out``, which perception loads with ``prior_source: learned terrain_classes:=...``. Printed:
-the scans used and skipped, per iteration the scans assigned per class and their total log
-evidence, the gate's two samples and the gate.
+the scans used and skipped, per EM step the scans assigned per class and their mean log
+evidence per scan (the library of the largest is kept), the gate's two samples and the gate.
 
 Try it without a robot: ``--render-training N --seed S`` first renders N train-split scenes into
 ``SCANS`` (new) with the mock camera: of every 7, 1 random wall (no class describes it) and 6
