@@ -14,7 +14,13 @@ from tactile_dock_ros.tools.bringup import isolate_dds
 TEST_DIR = Path(__file__).resolve().parent
 REPO_ROOT = TEST_DIR.parent
 
-isolate_dds()
+# `pytest -n N` (make test): each worker on its own domain. Workers inherit the controller's
+# environment, which this file set on import: worker k takes that domain + 1 + k (<= 232 for
+# N <= 32), so no two processes of the run share one and no other run's domain is likely.
+WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")  # gw0, gw1, ...
+isolate_dds(keep_domain=WORKER.startswith("gw"))
+if WORKER.startswith("gw"):
+    os.environ["ROS_DOMAIN_ID"] = str(int(os.environ["ROS_DOMAIN_ID"]) + 1 + int(WORKER[2:]))
 os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(TEST_DIR / "fastdds_profile.xml")
 # Child processes import the work-tree sources first, like pytest itself does.
 os.environ["PYTHONPATH"] = os.pathsep.join(

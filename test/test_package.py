@@ -89,10 +89,11 @@ ROS_KEYS = {
     "rosidl_default_generators", "rosidl_default_runtime", "sensor_msgs", "std_msgs", "std_srvs",
     "visualization_msgs",
 }  # fmt: skip
-# Pinned in requirements*.txt though nothing imports them: pytest's timeout plugin (pytest.ini)
-# and the linter test_ruff_passes_on_the_whole_tree runs. ROS wheels (ros-*) count as used: the
+# Pinned in requirements*.txt though nothing imports them: pytest's timeout plugin (pytest.ini),
+# its process pool (pytest-xdist: `make test` runs -n TEST_WORKERS) and the linter
+# test_ruff_passes_on_the_whole_tree runs. ROS wheels (ros-*) count as used: the
 # message build and rclpy need them without importing them by name.
-TOOLS = {"pytest-timeout", "ruff"}
+TOOLS = {"pytest-timeout", "pytest-xdist", "ruff"}
 # The layers that run without ROS (setup.py's library): no rclpy, no messages, no nodes.
 ROS_FREE = ("core", "perception", "execution")
 LOCAL = {"tactile_dock_ros"} | {p.stem for p in (REPO_ROOT / "test").glob("*.py")}
@@ -278,6 +279,27 @@ def test_make_builds_each_distro_in_its_own_venv(distro, tmp_path):
     assert f"{venv}/bin/python -m pip install" in run.stdout
     assert f"-r {requirements}" in run.stdout
     assert f"-B build/{distro}" in run.stdout
+
+
+def _test_domain(worker: str | None, inherited: str) -> int:
+    """The ROS_DOMAIN_ID a test process gets from conftest.py, as xdist worker ``worker``
+    (None: a single pytest process) started with ``inherited`` in its environment."""
+    env = {**os.environ, "ROS_DOMAIN_ID": inherited, "PYTHONPATH": str(REPO_ROOT / "test")}
+    env.pop("PYTEST_XDIST_WORKER", None)
+    if worker is not None:
+        env["PYTEST_XDIST_WORKER"] = worker
+    code = "import os, conftest; print(os.environ['ROS_DOMAIN_ID'])"
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    return int(run.stdout)
+
+
+def test_each_pytest_worker_runs_on_its_own_dds_domain():
+    """`make test` (pytest -n): a worker takes the controller's random domain + 1 + its index,
+    so the workers' nodes never discover each other; a single process draws its own."""
+    assert [_test_domain(w, "150") for w in ("gw0", "gw1")] == [151, 152]
+    alone = _test_domain(None, "7")  # a user's domain is replaced by a random test domain
+    assert 100 <= alone <= 200
 
 
 def test_make_refuses_a_distro_without_pypi_wheels():
