@@ -1,5 +1,7 @@
 """bench episode's bookkeeping: how an episode ended, per-problem counts, bad arguments."""
 
+import argparse
+
 import pytest
 from std_msgs.msg import Header
 
@@ -56,8 +58,18 @@ def test_summary_separates_planner_give_ups_from_the_budget_and_stuck_planners()
     assert s["other"] == 2 and s["cycles_median"] == 2.5
 
 
-@pytest.mark.parametrize("bad", [["--seeds", "0"], ["--problems", "boulder"]])
+@pytest.mark.parametrize(
+    "bad", [["--seeds", "0"], ["--problems", "boulder"], ["--prior-source", "moon"]]
+)
 def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:
         bench.main(["episode", *bad])
     assert exit_info.value.code == 2
+
+
+@pytest.mark.parametrize("source", ["depth", "learned", "problem"])
+def test_each_prior_source_of_the_launch_file_is_offered(source):
+    """Every prior_source perception takes (``launch/tactile_dock.launch.xml``) can be asked."""
+    parser = argparse.ArgumentParser()
+    bench_episode.add_arguments(parser)
+    assert parser.parse_args(["--prior-source", source]).prior_source == source

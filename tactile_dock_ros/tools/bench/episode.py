@@ -39,7 +39,14 @@ def _positive(text: str) -> int:
 def add_arguments(parser) -> None:
     parser.add_argument("--problems", nargs="+", default=problems.names(), choices=problems.names())
     parser.add_argument("--seeds", type=_positive, default=5, help="truth seeds per problem")
-    parser.add_argument("--prior-source", default="depth", choices=("depth", "problem"))
+    parser.add_argument(
+        "--prior-source",
+        default="depth",
+        choices=("depth", "learned", "problem"),
+        help="perception's prior_source (launch argument): depth (the default), learned (the "
+        "shipped terrain classes on the same depth image, the launch file's terrain_classes) or "
+        "problem (the problem's hand-made prior)",
+    )
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per episode")
 
 
