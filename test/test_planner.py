@@ -118,6 +118,24 @@ def test_a_tool_on_the_outline_leaves_the_way_it_came():
     assert planner.retrace(history, np.array([0.3, 0.5]), space, 0.005) is None  # too far
 
 
+def test_a_tool_a_slide_away_from_its_moves_steps_straight_back_to_them():
+    """A non-compliant slide run for evidence that stuck reports only its first contact: the
+    executor leaves the tool up to ``max_slide`` (0.3 m) plus its retreat from every recorded
+    move. ``retrace`` steps straight back to the latest move and follows it out; farther than
+    that reach, no move is the tool's."""
+    block = shapely.box(-1.0, -1.0, 1.0, 1.0)
+    space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, np.array([0.0, 2.0]))
+    history = History(
+        [[0.0, 2.0], [0.0, 0.995]], [[0.0, 0.995], [0.0, 0.985]], [Status.FREE, Status.SLIP_LEFT]
+    )
+    slid = np.array([-0.28, 0.99])  # slid 0.28 m left along the face, then retreated
+    path = planner.retrace(history, slid, space, 0.005)
+    np.testing.assert_allclose(path, [slid, [0.0, 0.995], [0.0, 2.0]])  # its nearest point
+    assert planner.RETRACE_REACH >= 0.3 + 0.02  # max_slide plus the retreat (config/*.yaml)
+    beyond = np.array([-planner.RETRACE_REACH - 0.01, 0.99])
+    assert planner.retrace(history, beyond, space, 0.005) is None
+
+
 def test_retrace_crosses_from_a_plan_to_the_move_the_executor_retreated_along():
     """A plan starts where the executor's retreat (not recorded) left the tool: 1 cm back along
     the previous plan's last move, not at its end. The walk continues along that move."""

@@ -86,7 +86,10 @@ class Plan:
     rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
 
 
-RETRACE_REACH = 0.05  # m: the executor's retreat (0.02 m) plus margin (``retrace``)
+# m: how far the executor's unrecorded motion after a contact can leave the tool from its
+# recorded moves (``retrace``): a non-compliant slide that reports only its first contact (up
+# to ``max_slide``, 0.3 m in both profiles), then its retreat and release (0.02 m each)
+RETRACE_REACH = 0.35
 
 
 def retrace(
@@ -100,7 +103,11 @@ def retrace(
     recorded), where the posterior's margin often covers it; when ``FreeSpace.ascend`` finds
     no way out (the tool sits on the mean outline), the tool leaves the way it came. It steps
     to the nearest point of the latest free observation within RETRACE_REACH metres (undoing
-    the retreat), follows it back to its start, then earlier ones passing within ``step`` of
+    the retreat, or a non-compliant slide the executor ran for evidence and reported only as
+    its first contact: a straight, guarded step back; measured 2026-11-28, ``bench episode``
+    on the mock profile, depth prior: 3 of 4 feasible notch truths gave up "with no way out"
+    after such a slide of 0.1-0.2 m, with a reach of 0.05 m), follows it back to its start,
+    then earlier ones passing within ``step`` of
     where the walk stands, each back to its start (free observations are recorded in move
     order, each starting where the previous one ended, or, for a plan's first move, where the
     executor's unrecorded retreat along the previous plan's last move left the tool, i.e. on
