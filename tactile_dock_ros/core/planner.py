@@ -102,17 +102,18 @@ def retrace(
     the end of the last one; the executor: after its retreat, 0.02 m by default, which is not
     recorded), where the posterior's margin often covers it; when ``FreeSpace.ascend`` finds
     no way out (the tool sits on the mean outline), the tool leaves the way it came. It steps
-    to the nearest point of the latest free observation within RETRACE_REACH metres (undoing
-    the retreat, or a non-compliant slide the executor ran for evidence and reported only as
-    its first contact: a straight, guarded step back; measured 2026-11-28, ``bench episode``
-    on the mock profile, depth prior: 3 of 4 feasible notch truths gave up "with no way out"
-    after such a slide of 0.1-0.2 m, with a reach of 0.05 m), follows it back to its start,
-    then earlier ones passing within ``step`` of
-    where the walk stands, each back to its start (free observations are recorded in move
-    order, each starting where the previous one ended, or, for a plan's first move, where the
-    executor's unrecorded retreat along the previous plan's last move left the tool, i.e. on
-    that move, not at its end): space the tool has crossed, which no sample consistent with
-    the history intersects. Not a hot path: one walk over the history per plan.
+    to the nearest point of the latest free observation within RETRACE_REACH metres, follows
+    it back to its start, then earlier ones passing within ``step`` of where the walk stands,
+    each back to its start (free observations are recorded in move order, each starting where
+    the previous one ended, or, for a plan's first move, where the executor's unrecorded
+    retreat along the previous plan's last move left the tool, i.e. on that move, not at its
+    end): space the tool has crossed, which no sample consistent with the history intersects.
+    Not a hot path: one walk over the history per plan.
+
+    The first step undoes the retreat, or a non-compliant slide the executor ran for evidence
+    and reported only as its first contact: a straight, guarded step back. Measured
+    2026-11-28 (``bench episode`` on the mock profile, depth prior): with a reach of 0.05 m,
+    3 of 4 feasible notch truths gave up "with no way out" after such a slide of 0.1-0.2 m.
     """
     free = np.flatnonzero(np.asarray(history.status) == Status.FREE)
     a, b = history.a[free], history.b[free]

@@ -114,12 +114,13 @@ def run(node: str, log_dir: Path, seed: int = 5, timeout_s: float = 120.0) -> di
                 return plans[0] if plans and plans[0].decision == DockingPlan.DOCK else None
 
             wait("the second plan", lambda: second_move() is not None or record.state in ended)
-            if second_move() is None:  # e.g. a give-up at cycle 2, or a starved machine's timeout
+            moved = second_move()
+            if moved is None:  # e.g. a give-up at cycle 2, or a starved machine's timeout
                 why = f"{record.state} {record.detail}"
                 raise EndedBeforeFault(
                     f"the episode ended before the fault: {why} (logs: {log_dir})"
                 )
-            episode_id, killed_during = second_move().episode, second_move().plan_id
+            episode_id, killed_during = moved.episode, moved.plan_id
             t_plan = now()
             # The executor runs it (else nobody resends it while the planner is down).
             wait("the arm to move", lambda: any(t > t_plan and not _zero(m) for t, m in commands))
