@@ -284,8 +284,13 @@ def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
     errors = [tuple(t["calibration_error"]) for t in truths]
     assert len(set(errors)) == 3 and all(len(e) == 6 for e in errors)  # drawn per truth
     assert all(t["depth_prior_vertices"] >= 2 for t in truths)
-    # the same seeds in one process give the same episodes and the same drawn errors
-    again = _quick(tmp_path, "depth.json", "--prior", "depth", "--mode", "non-compliant")
+    # the same seeds in one process give the same episodes and the same drawn errors, also
+    # with the sampler's exit search split over 2 threads
+    again = _quick(
+        tmp_path, "depth.json", "--prior", "depth", "--mode", "non-compliant",
+        "--sampler-threads", "2",
+    )  # fmt: skip
+    assert report["sampler_threads"] == 1 and again["sampler_threads"] == 2
     assert [tuple(t["calibration_error"]) for t in again["truths"]["notch"]] == errors
     key = ("depth", "non-compliant")
     strip = [{k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in rows[key]["episodes"]]
@@ -299,7 +304,7 @@ def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
     [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
      ["--samples", "1"], ["--max-cycles", "-2"], ["--give-up-threshold", "0"],
      ["--give-up-threshold", "1.5"], ["--seed", "-1"], ["--seed", str(2**22)],
-     ["--split", "validation"]],
+     ["--split", "validation"], ["--sampler-threads", "0"]],
 )  # fmt: skip
 def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:

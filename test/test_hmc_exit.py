@@ -1,5 +1,8 @@
 """The compiled window-exit search of the HMC loop against the numpy interval algebra."""
 
+import multiprocessing
+import threading
+
 import numpy as np
 import pytest
 from constraint_cases import history_system, linear_system
@@ -58,6 +61,81 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     unit = [system.gradient(z_exit, k) for k in (got_owner[leave], owner[leave, first[leave] - 1])]
     unit = [g / np.linalg.norm(g, axis=1, keepdims=True) for g in unit]
     np.testing.assert_allclose(np.abs(np.sum(unit[0] * unit[1], axis=1)), 1.0, atol=1e-9)
+
+
+def _split_case():
+    """The notch case's window-exit arguments on short windows (some chains leave)."""
+    system, z = CASES["notch, live-pair judging"]()
+    rng = np.random.default_rng(11)
+    p = rng.standard_normal(z.shape)
+    span = rng.uniform(0.05, 0.3, len(z))
+    phi = 0.5 * float(span.max())
+    return (
+        *system.ellipse_terms(z, p), system.window_tables, span, phi,
+        intervals.trig_to_quartic(phi), system.exit_structure,
+    )  # fmt: skip
+
+
+def _chains(args, n):
+    """The first n chains of ``window_exits`` arguments."""
+    lin0, linp, tables, span, *rest = args
+    return (lin0[:n], linp[:n], tables, span[:n], *rest)
+
+
+@pytest.mark.parametrize("threads", [2, 3])
+def test_exit_search_split_over_threads_gives_the_same_exits(threads, monkeypatch):
+    """``split_exits`` deals the chains round-robin to threads: every chain's exit is the one
+    the single call finds, in the caller's chain order, and the parts really run on the
+    pool's threads (a split that ran everything in the caller would pass the first part).
+    Calls too small to be worth it (SPLIT_MIN_WORK) or with under 2 chains a part: one call."""
+    args = _split_case()
+    n_chains, n_prims = len(args[0]), len(args[2][0])
+    whole = hmc_exit.window_exits(*args)
+    assert 0 < whole[0].sum() < n_chains
+    seen = []
+    search = hmc_exit.window_exits
+
+    def recorded(lin0, *rest):
+        seen.append((threading.current_thread().name, len(lin0)))
+        return search(lin0, *rest)
+
+    monkeypatch.setattr(hmc_exit, "window_exits", recorded)
+    monkeypatch.setattr(hmc_exit, "SPLIT_MIN_WORK", n_chains * n_prims)
+    split = hmc_exit.split_exits(threads, *args)
+    for got, want in zip(split, whole, strict=True):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+    parts = [len(range(i, n_chains, threads)) for i in range(threads)]
+    assert sorted(n for _, n in seen) == sorted(parts)
+    assert sum(name.startswith("hmc_exit") for name, _ in seen) == threads - 1
+    for few in (2 * threads - 1, n_chains - 1):  # too few chains a part; too little work
+        seen.clear()
+        hmc_exit.split_exits(threads, *_chains(args, few))
+        assert [n for _, n in seen] == [few]
+
+
+def _split_in_child(args, queue):
+    queue.put(hmc_exit.split_exits(2, *args))
+
+
+def test_a_forked_process_splits_on_its_own_threads(monkeypatch):
+    """A process forked after its parent split a search (``bench docking --workers``) has none
+    of the parent's pool threads: it makes its own instead of waiting for them forever."""
+    monkeypatch.setattr(hmc_exit, "SPLIT_MIN_WORK", 0)
+    args = _split_case()
+    whole = hmc_exit.split_exits(2, *args)  # the parent's pool exists now
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_split_in_child, args=(args, queue))
+    child.start()
+    try:
+        got = queue.get(timeout=60)
+    finally:
+        child.join(timeout=10)
+        if child.is_alive():
+            child.kill()
+    for a, b in zip(got, whole, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("case", list(CASES))

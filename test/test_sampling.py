@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tactile_dock_ros.core import convergence, problems, sampling
+from tactile_dock_ros.core import convergence, hmc_exit, problems, sampling
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints, LinearConstraints
 from tactile_dock_ros.core.constraints import history_consistent, prune_pairs
 from tactile_dock_ros.core.ess import effective_sample_size
@@ -265,6 +265,25 @@ def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
     for end, count in ends.values():
         assert count == bounces
         np.testing.assert_allclose(end, whole, atol=1e-8)
+
+
+def test_sampler_threads_change_no_draw(sloper_case, monkeypatch):
+    """The exit search split over threads (``sample_posterior(threads=...)``, the inference
+    node's ``sampler_threads``) returns the same posterior, draw for draw, as one thread; a
+    thread count that is not an integer >= 1 is refused before anything is drawn."""
+    problem, history = sloper_case
+    monkeypatch.setattr(hmc_exit, "SPLIT_MIN_WORK", 0)  # split even this small system
+    calls = []
+    split = sampling.split_exits
+    monkeypatch.setattr(sampling, "split_exits", lambda t, *a: calls.append(t) or split(t, *a))
+    one = sample_posterior(problem.prior, history, 64, np.random.default_rng(8))
+    two = sample_posterior(problem.prior, history, 64, np.random.default_rng(8), threads=2)
+    assert one.info["bounces"] > 0
+    np.testing.assert_array_equal(two.z, one.z)
+    assert set(calls) == {1, 2}  # each run's exit searches with its thread count
+    for bad in (0, -1, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="sampler threads"):
+            sample_posterior(problem.prior, history, 16, np.random.default_rng(8), threads=bad)
 
 
 @pytest.mark.parametrize("target", [sampling.HMC_TARGET_BOUNCES, 2])

@@ -95,6 +95,7 @@ def run_episode(
     keep_samples: int = 20,
     prior: GaussianShape | None = None,
     observe: Callable[[CycleView], None] | None = None,
+    sampler_threads: int = 1,
 ) -> EpisodeResult:
     """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
 
@@ -112,7 +113,8 @@ def run_episode(
     predicts as without it, so its P_dock is of the executed event.
     ``observe`` (diagnostic tools, e.g. ``tools.bench.posterior``) is called with a
     ``CycleView`` after each plan, before the move; an exception it raises ends the episode
-    as an error like any other.
+    as an error like any other. ``sampler_threads``: ``sampling.sample_posterior``'s
+    ``threads`` (the same episode in any count, only the cycle times change).
     Raises ValueError on a bad strategy, ``max_cycles`` or planner setting (``PlannerConfig``).
     """
     if strategy not in STRATEGIES:
@@ -139,6 +141,7 @@ def run_episode(
                 known_dropped=state.dropped,
                 deferral=state.deferral,  # rows set aside while their seed search goes on
                 seed_round_restarts=sampling.SEED_ROUND_RESTARTS,  # the rest: next cycle
+                threads=sampler_threads,
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:

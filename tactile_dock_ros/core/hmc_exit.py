@@ -35,6 +35,10 @@ observation, violated where it is > 0.
 
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numba
 import numpy as np
 
@@ -54,6 +58,13 @@ POWER_TO_BERNSTEIN = np.array(
 # value of an inactive pair slot: far below any primitive's, so the pair's max / min structure
 # ignores it as it would -inf, without inf arithmetic in products
 INACTIVE = -1e300
+# ``split_exits`` splits calls of at least this many chain x primitive coefficient builds:
+# on a depth-prior three_ledges episode smaller calls (mostly under 0.6 ms) took as long or
+# longer split over 2 threads (dispatch, unequal root solving per chain), calls of 2^16 took
+# 0.74x (2026-11-28, one-off timing of every call of the episode both ways)
+SPLIT_MIN_WORK = 2**15
+_POOLS: dict[int, ThreadPoolExecutor] = {}  # ``split_exits``' worker threads, by count
+_POOLS_LOCK = threading.Lock()
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -244,7 +255,7 @@ def _chain_window(lin0, linp, quad, tables, span, bern, structure, coef, solve, 
                     solve[pair_prims[p, j]] = False
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", nogil=True)
 def window_exits(lin0, linp, tables, span, phi, to_quartic, structure):
     """Per chain c, from its ellipse terms (``ellipse_terms`` of the constraint system:
     ``lin0``, ``linp`` (C, E, J)) and the system's ``window_tables``: whether it leaves the
@@ -305,6 +316,54 @@ def window_exits(lin0, linp, tables, span, phi, to_quartic, structure):
                 break
             start = end
     return hit, dt, owner, stuck
+
+
+def split_exits(threads, lin0, linp, tables, span, phi, to_quartic, structure):
+    """``window_exits`` with the chains dealt round-robin to ``threads`` parts: one searched
+    in the calling thread, the others by the process's pool of ``threads`` - 1 workers
+    (``_pool``; the compiled search releases the GIL). Chains are independent, so the results
+    are those of one call, bit for bit, in any thread count. One call where a part would get
+    fewer than 2 chains or the call is small (chains x primitives < SPLIT_MIN_WORK).
+
+    Decision (not in the paper): round-robin, not contiguous blocks, because a chain's cost
+    varies with its bounces and neighbouring chains share seeds; on the calls of a late
+    depth-prior three_ledges cycle (16 chains) contiguous halves gained 1.3x on 2 cores,
+    round-robin 1.45x (2026-11-28, one-off timing)."""
+    n_chains = lin0.shape[0]
+    if threads < 2 or n_chains < 2 * threads or n_chains * tables[0].shape[0] < SPLIT_MIN_WORK:
+        return window_exits(lin0, linp, tables, span, phi, to_quartic, structure)
+    parts = [np.arange(i, n_chains, threads) for i in range(threads)]
+    pool = _pool(threads - 1)
+    futures = [
+        pool.submit(window_exits, lin0[i], linp[i], tables, span[i], phi, to_quartic, structure)
+        for i in parts[1:]
+    ]
+    first = parts[0]
+    results = [
+        window_exits(lin0[first], linp[first], tables, span[first], phi, to_quartic, structure)
+    ]
+    results += [f.result() for f in futures]
+    back = np.argsort(np.concatenate(parts))  # the results' rows -> chain order
+    return tuple(np.concatenate(pieces)[back] for pieces in zip(*results, strict=True))
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of ``workers`` threads (made on first use, kept: a pool per HMC call
+    would start threads several times per cycle); any thread may submit to it. A forked child
+    (``bench docking --workers``) starts without pools: its parent's threads are not in it."""
+    with _POOLS_LOCK:
+        if workers not in _POOLS:
+            _POOLS[workers] = ThreadPoolExecutor(workers, thread_name_prefix="hmc_exit")
+        return _POOLS[workers]
+
+
+def _forget_pools() -> None:
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pools)
 
 
 def structure(pair_prims, pair_obs, pair_free, contact_obs, plain: bool) -> tuple:

@@ -30,7 +30,7 @@ from .convergence import (
 )
 from .ess import effective_sample_size
 from .history import History
-from .hmc_exit import window_exits
+from .hmc_exit import split_exits
 from .intervals import (
     line_roots,
     line_scan,
@@ -203,6 +203,7 @@ def hmc_chains(
     max_bounces: int = 500,
     window: float | None = None,
     burn_in: int = 0,
+    threads: int = 1,
 ) -> tuple[np.ndarray, dict]:
     """``burn_in`` discarded then ``n_steps`` kept HMC-with-bouncing moves (Alg. 1) of each
     chain z (C, m): the kept states (C, n_steps, m).
@@ -236,7 +237,9 @@ def hmc_chains(
     - roots closer than ROOT_MIN_TIME (1e-9) to the window start are ignored (the one just
       bounced on);
     - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
-      loop schedules windows and bounces.
+      loop schedules windows and bounces;
+    - ``threads`` > 1 deals each iteration's chains to that many threads for the exit search
+      (``hmc_exit.split_exits``): the same draws in any thread count, only faster.
     Returns the draws and counters (bounces, rejected moves, travel: rad followed by all
     chains, rejected moves included; ``duration``: each chain's T of its kept moves, (C,)).
     """
@@ -245,6 +248,7 @@ def hmc_chains(
     longest = np.broadcast_to(np.asarray(duration, dtype=float), (c,))
     if not np.all((longest > 0) & (longest < np.pi)):
         raise ValueError(f"HMC duration must be in (0, pi), got {duration}")
+    threads = _thread_count(threads)
     moves = burn_in + n_steps
     out = np.empty((c, n_steps, m))
     done = np.zeros(c, dtype=int)  # moves finished, burn-in included
@@ -272,7 +276,8 @@ def hmc_chains(
         zc, pc, lc = z[idx], p[idx], left[idx]
         span = np.minimum(lc, win[idx])
         phi = 0.5 * float(span.max())  # quartics in time shifted as in ``ellipse_roots``
-        hit, dt, owner, stuck = window_exits(
+        hit, dt, owner, stuck = split_exits(
+            threads,
             *system.ellipse_terms(zc, pc),
             system.window_tables,
             span,
@@ -322,6 +327,13 @@ def hmc_chains(
     return out, stats
 
 
+def _thread_count(threads) -> int:
+    """``threads`` as an int; ValueError unless it is an integer >= 1."""
+    if isinstance(threads, bool) or not isinstance(threads, int | np.integer) or threads < 1:
+        raise ValueError(f"sampler threads must be an integer >= 1, got {threads!r}")
+    return int(threads)
+
+
 def gibbs_sweep(system, z: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """One Gibbs sweep over every coordinate of z (Sec. IV-D): z_i from N(0, 1) restricted to
     the feasible interval set along axis i (App. A). A row with no feasible mass keeps z_i."""
@@ -357,11 +369,13 @@ class ChainRunner:
         rng: np.random.Generator,
         hmc_duration: float = np.pi / 2,
         mh_scale: float | None = None,
+        threads: int = 1,
     ):
         if method not in MCMC_METHODS:
             raise ValueError(f"unknown MCMC method {method!r}; choose from {MCMC_METHODS}")
         self.system, self.method, self.rng = system, method, rng
         self.hmc_duration = self.duration = hmc_duration
+        self.threads = _thread_count(threads)  # HMC's exit search (``hmc_chains``)
         self.scale = mh_scale if mh_scale is not None else 0.5 / np.sqrt(max(system.n_dim, 1))
         self.stats = {"bounces": 0, "accepted": 0, "proposed": 0}
 
@@ -407,7 +421,9 @@ class ChainRunner:
         burn-in continues the chains of the last call with burn-in, with their T (all at
         ``hmc_duration`` if there was none)."""
         duration = self.hmc_duration if burn_in else self.duration
-        draws, stats = hmc_chains(self.system, z, moves, self.rng, duration, burn_in=burn_in)
+        draws, stats = hmc_chains(
+            self.system, z, moves, self.rng, duration, burn_in=burn_in, threads=self.threads
+        )
         if burn_in:
             self.duration = stats["duration"]
         self.stats["bounces"] += stats["bounces"]
@@ -1003,6 +1019,7 @@ def sample_posterior(
     known_dropped=(),
     deferral: Deferral | None = None,
     seed_round_restarts: int | None = None,
+    threads: int = 1,
 ) -> PosteriorSamples:
     """Draw ``n_samples`` shapes from P(x | H) (Sec. IV).
 
@@ -1025,7 +1042,8 @@ def sample_posterior(
     sample satisfies every observation that is neither dropped nor deferred under the exact
     geometric test. An empty history returns exact prior draws. ``max_steps`` (default
     50 n / chains + 1000) bounds the MCMC steps per chain; fewer samples are returned if
-    verification keeps failing.
+    verification keeps failing. ``threads``: threads of HMC's exit search (``hmc_chains``);
+    the samples are the same in any count (the random draws do not depend on it).
 
     ``known_dropped``: history rows an earlier call dropped (the previous cycle's
     ``dropped``); they stay out and are reported in ``dropped`` again. Decision: a row once
@@ -1071,6 +1089,7 @@ def sample_posterior(
         chains = default_chains(method, n_samples)
     if chains < 1 or thin < 1:
         raise ValueError("chains and thin must be >= 1")
+    threads = _thread_count(threads)
     if init_z is not None:
         init_z = np.asarray(init_z, dtype=float).reshape(-1, shape.n_basis)
         if not np.all(np.isfinite(init_z)):
@@ -1168,7 +1187,9 @@ def sample_posterior(
     if burn_in is None:
         burn_in = SAMPLERS[method].burn_in[int(warm)]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
-    runner = ChainRunner(seeds.system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale)
+    runner = ChainRunner(
+        seeds.system, method, rng, hmc_duration=hmc_duration, mh_scale=mh_scale, threads=threads
+    )
     run = _ChainRun(runner, shape, sub, per_chain, thin, burn_in, max_steps, rng)
     draws, last, kept = run(seeds.z)
     draws, convergence = _reseed_trapped(run, draws, last, seeds.exact[kept], rng)

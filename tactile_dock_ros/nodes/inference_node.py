@@ -79,6 +79,15 @@ PARAMS = [
     ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
+    Param(
+        "sampler_threads",
+        2,
+        "threads of the HMC exit search; the same samples in any count, shorter cycles where "
+        "cores are free",
+        "",
+        1,
+        64,
+    ),
     Param("marker_samples", 20, "samples drawn as RViz line strips", "", 0, 1000),
     MAX_HOLDS,
     Param(
@@ -336,6 +345,7 @@ class InferenceNode(Node):
                 known_dropped=state.dropped,  # rows judged inconsistent stay out
                 deferral=state.deferral,  # rows set aside while their seed search goes on
                 seed_round_restarts=SEED_ROUND_RESTARTS,  # the rest: next cycle
+                threads=self.p.sampler_threads,
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")

@@ -39,6 +39,7 @@ SUITES = {
     "probsim": "P(C_e) accuracy (App. B) and P_dock speed per docking site vs Monte Carlo / scipy",
     "safety": "executor under faults over DDS: sensor dropout latency, envelope, load jitter",
     "sampling": "EST of rejection/MH/Gibbs/HMC posterior sampling (Fig. 9) and tmg-hmc",
+    "threads": "an episode's sampler calls again with each sampler_threads count: seconds, ratio",
 }
 
 MODULES = {"fuzz": "tactile_dock_ros.tools.fuzz"}  # suites not in this package

@@ -52,9 +52,11 @@ planner that keeps predicting 15 % for attempts that dock 4 % of the time keeps 
 infeasible terrain: the table measures that overconfidence instead of leaving it to be guessed
 from the give-up counts. With ``--workers N`` episodes run
 in N processes (per-episode seeds do not depend on N); cycle times are then per process on a
-machine running N episodes at once. Episodes are the repetitions: ``--repeats`` is not used;
-``--episode-seeds K`` runs K episodes per truth with different sampler seeds, and the counts
-(``instances``, feasible, give-ups) are then over episodes, K per truth.
+machine running N episodes at once. ``--sampler-threads T`` gives each episode's sampler T
+threads (the inference node's ``sampler_threads``; the same episodes in any T). Episodes are
+the repetitions: ``--repeats`` is not used; ``--episode-seeds K`` runs K episodes per truth
+with different sampler seeds, and the counts (``instances``, feasible, give-ups) are then over
+episodes, K per truth.
 """
 
 from __future__ import annotations
@@ -195,6 +197,14 @@ def add_arguments(parser) -> None:
         "first as with 1): averages out outcomes that change from seed to seed",
     )
     parser.add_argument("--workers", type=_at_least(1), default=1, help="episode processes")
+    parser.add_argument(
+        "--sampler-threads",
+        type=_at_least(1),
+        default=1,
+        help="threads of each episode's HMC exit search (the inference node's sampler_threads): "
+        "the same episodes in any count, shorter cycles where cores are free (keep workers x "
+        "threads <= cores when timing)",
+    )
     add_split_argument(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 truths, cap 3")
     parser.add_argument(
@@ -222,6 +232,7 @@ class _Task:
     samples: int
     give_up_threshold: float
     slide_on_slip: bool = False
+    sampler_threads: int = 1
 
 
 @functools.cache
@@ -261,6 +272,7 @@ def _episode(task: _Task) -> dict:
         compliant=task.mode == "compliant",
         slide_on_slip=task.slide_on_slip,
         prior=task.prior,
+        sampler_threads=task.sampler_threads,
     )
     return {
         **record,
@@ -735,6 +747,7 @@ def run(args) -> dict:
             args.samples,
             args.give_up_threshold,
             args.slide_on_slip,
+            args.sampler_threads,
         )
         for i in range(instances)
         for repeat in range(args.episode_seeds)
@@ -792,13 +805,15 @@ def run(args) -> dict:
         "slide_on_slip": args.slide_on_slip,
         "episode_seeds": args.episode_seeds,
         "workers": args.workers,
+        "sampler_threads": args.sampler_threads,
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
         "terrain_classes": None if library_path is None else str(library_path.resolve()),
         "min_inlier_fraction": gate,
         "learned_fallbacks": fallbacks,
         "note": "wall times per process, from a shared 2-core machine "
-        f"running {args.workers} episode process(es)",
+        f"running {args.workers} episode process(es) of {args.sampler_threads} sampler "
+        "thread(s)",
         "truths": {name: [_truth_record(t) for t in entries] for name, entries in truths.items()},
         "results": results,
         "attempt_calibration": calibration,
