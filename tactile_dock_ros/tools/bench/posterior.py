@@ -49,10 +49,13 @@ from tactile_dock_ros.tools.bench.docking import (
 )
 
 
-def add_arguments(parser) -> None:
+def add_replay_arguments(parser, instance: int, seed: int) -> None:
+    """The episode a suite replays (``replay_episode``): one of bench docking's training truths
+    (default ``instance``) and episode seeds (default ``seed``), prior, mode, strategy, cycle
+    cap, samples and the episode settings; shared with ``bench threads``."""
     parser.add_argument("--problem", default="three_ledges", choices=problems.names())
     parser.add_argument(
-        "--instance", type=_at_least(0), default=19, help="truth index, as in bench docking"
+        "--instance", type=_at_least(0), default=instance, help="truth index, as in bench docking"
     )
     parser.add_argument("--prior", default="depth", choices=PRIORS)
     parser.add_argument("--mode", default="compliant", choices=MODES)
@@ -60,11 +63,46 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--episode-seed",
         type=_at_least(0),
-        default=0,
+        default=seed,
         help="which of bench docking's --episode-seeds episodes (0: the truth's own seed)",
     )
     parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
     parser.add_argument("--samples", type=_at_least(2), default=100, help="posterior samples")
+    add_episode_arguments(parser)
+    add_slide_argument(parser)
+
+
+def replay_episode(args, max_cycles: int):
+    """The truth (``docking._truths``' entry), the prior, the ``explore.CycleView`` of every
+    cycle and the result of the episode ``add_replay_arguments`` chose, capped at
+    ``max_cycles``."""
+    config = None
+    if args.prior == "depth":
+        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
+    truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
+    problem = _problem(args.problem)
+    shape = problem.prior if args.prior == "problem" else truth["depth"]
+    if shape is None:
+        raise SystemExit(f"no depth prior for this truth: {truth['perception_error']}")
+    views: list[explore.CycleView] = []
+    result = explore.run_episode(
+        problem,
+        truth["truth"],
+        args.strategy,
+        np.random.default_rng(episode_seed(truth["seed"], args.episode_seed)),
+        max_cycles,
+        n_samples=args.samples,
+        give_up_threshold=args.give_up_threshold,
+        compliant=args.mode == "compliant",
+        slide_on_slip=args.slide_on_slip,
+        prior=shape,
+        observe=views.append,
+    )
+    return truth, shape, views, result
+
+
+def add_arguments(parser) -> None:
+    add_replay_arguments(parser, instance=19, seed=0)
     parser.add_argument(
         "--cycles", type=int, nargs="+", help="cycles to check, from 0 (default: all)"
     )
@@ -105,8 +143,6 @@ def add_arguments(parser) -> None:
         choices=("warm", "cold"),
         help="--sampler-runs from the previous cycle's samples (as the loop) or the seeding",
     )
-    add_episode_arguments(parser)
-    add_slide_argument(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 2 cycles, 200 particles")
 
 
@@ -325,28 +361,7 @@ def run(args) -> dict:
             f"--references x --particles ({args.references} x {particles}) must be at least "
             f"2 x --samples ({args.samples}): the noise floor compares that many draws"
         )
-    config = None
-    if args.prior == "depth":
-        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
-    problem = _problem(args.problem)
-    shape = problem.prior if args.prior == "problem" else truth["depth"]
-    if shape is None:
-        raise SystemExit(f"no depth prior for this truth: {truth['perception_error']}")
-    views: list[explore.CycleView] = []
-    result = explore.run_episode(
-        problem,
-        truth["truth"],
-        args.strategy,
-        np.random.default_rng(episode_seed(truth["seed"], args.episode_seed)),
-        max_cycles,
-        n_samples=args.samples,
-        give_up_threshold=args.give_up_threshold,
-        compliant=args.mode == "compliant",
-        slide_on_slip=args.slide_on_slip,
-        prior=shape,
-        observe=views.append,
-    )
+    truth, shape, views, result = replay_episode(args, max_cycles)
     p_dock = [round(c.plan.p_dock, 3) for c in result.cycles_log]
     print(f"episode: {result.outcome} after {result.cycles} moves, P_dock per cycle {p_dock}")
     wanted = range(len(views)) if args.cycles is None else args.cycles

@@ -4,11 +4,12 @@ the median seconds per count and its ratio to the first count's. The draws must 
 every count: a cycle whose draws differ fails the run.
 
 The episode is bench docking's (a training truth, as ``bench posterior``: ``--problem``,
-``--instance``, ``--episode-seed``, ``--prior``, ``--mode``), run once with one thread. Each
-cycle's sampler call is then repeated with the inputs the loop gave it (the history, the
-previous posterior as warm start, the rows left out and deferred) and its own seeded generator;
-within a repetition the counts run in rotating order, so that a drift of the machine's speed
-spreads over all counts. Cycles without a history (prior draws only) are not timed.
+``--instance``, ``--episode-seed``, ``--prior``, ``--mode``, ``--strategy``), run once with one
+thread. Each cycle's sampler call is then repeated with the inputs the loop gave it (the
+history, the previous posterior as warm start, the rows left out and deferred) and its own
+seeded generator; within a repetition the counts run in rotating order, so that a drift of the
+machine's speed spreads over all counts. Cycles without a history (prior draws only) are not
+timed.
 
 Example: ``python -m tactile_dock_ros.tools.bench threads --problem three_ledges --instance 9
 --episode-seed 1 --threads 1 2 --repeats 5 --json out.json``. On a machine that runs other work,
@@ -22,36 +23,13 @@ import time
 
 import numpy as np
 
-from tactile_dock_ros.core import explore, problems, sampling
-from tactile_dock_ros.perception.config import PerceptionConfig
-from tactile_dock_ros.tools import package_files
-from tactile_dock_ros.tools.bench.docking import (
-    MODES,
-    PRIORS,
-    _at_least,
-    _problem,
-    _truths,
-    add_episode_arguments,
-    add_slide_argument,
-    episode_seed,
-)
+from tactile_dock_ros.core import sampling
+from tactile_dock_ros.tools.bench.docking import _at_least
+from tactile_dock_ros.tools.bench.posterior import add_replay_arguments, replay_episode
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--problem", default="three_ledges", choices=problems.names())
-    parser.add_argument(
-        "--instance", type=_at_least(0), default=9, help="training truth index, as in bench docking"
-    )
-    parser.add_argument("--prior", default="depth", choices=PRIORS)
-    parser.add_argument("--mode", default="compliant", choices=MODES)
-    parser.add_argument(
-        "--episode-seed",
-        type=_at_least(0),
-        default=1,
-        help="which of bench docking's --episode-seeds episodes (0: the truth's own seed)",
-    )
-    parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
-    parser.add_argument("--samples", type=_at_least(2), default=100, help="posterior samples")
+    add_replay_arguments(parser, instance=9, seed=1)
     parser.add_argument(
         "--threads",
         type=_at_least(1),
@@ -59,36 +37,7 @@ def add_arguments(parser) -> None:
         default=[1, 2],
         help="sampler thread counts, side by side (ratios are to the first)",
     )
-    add_episode_arguments(parser)
-    add_slide_argument(parser)
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 cycles, 1 repeat")
-
-
-def _episode(args):
-    """The episode's views (``explore.CycleView`` per cycle) and its outcome line."""
-    config = None
-    if args.prior == "depth":
-        config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
-    problem = _problem(args.problem)
-    shape = problem.prior if args.prior == "problem" else truth["depth"]
-    if shape is None:
-        raise SystemExit(f"no depth prior for this truth: {truth['perception_error']}")
-    views: list[explore.CycleView] = []
-    result = explore.run_episode(
-        problem,
-        truth["truth"],
-        "ours",
-        np.random.default_rng(episode_seed(truth["seed"], args.episode_seed)),
-        3 if args.quick else args.max_cycles,
-        n_samples=args.samples,
-        give_up_threshold=args.give_up_threshold,
-        compliant=args.mode == "compliant",
-        slide_on_slip=args.slide_on_slip,
-        prior=shape,
-        observe=views.append,
-    )
-    return shape, views, f"{result.outcome} after {result.cycles} cycles"
 
 
 def _timed(shape, view, before, n_samples, threads, seed):
@@ -111,7 +60,8 @@ def _timed(shape, view, before, n_samples, threads, seed):
 def run(args) -> dict:
     counts = list(dict.fromkeys(args.threads))
     repeats = 1 if args.quick else args.repeats
-    shape, views, outcome = _episode(args)
+    _, shape, views, result = replay_episode(args, 3 if args.quick else args.max_cycles)
+    outcome = f"{result.outcome} after {result.cycles} cycles"
     print(f"episode: {outcome}; threads {counts}, {repeats} repeat(s) per cycle")
     print(f"{'cycle':>5} {'rows':>5} " + " ".join(f"{f'{t} thr s':>9}" for t in counts) + "  ratio")
     cycles = []
@@ -166,6 +116,7 @@ def run(args) -> dict:
         "split": "train",
         "prior": args.prior,
         "mode": args.mode,
+        "strategy": args.strategy,
         "episode_seed": args.episode_seed,
         "episode": outcome,
         "threads": counts,
