@@ -67,8 +67,10 @@ def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path)
 def test_the_planner_plans_with_its_parameters(profile, tmp_path):
     from tactile_dock_ros.core.episode import PlannerConfig
 
-    with node_from_launch(launch_nodes(profile)["planner"], tmp_path) as (node, _):
+    slide = ["-p", "planner:max_slide:=0.45"]  # a team's longer slides (not the profiles' 0.3 m)
+    with node_from_launch(launch_nodes(profile)["planner"], tmp_path, slide) as (node, _):
         names = ("load_direction", "contact_resolution", "give_up_threshold", "compliant")
+        names += ("max_slide",)
         value = {name: node.get_parameter(name).value for name in names}
         box = [node.get_parameter(f"workspace_{end}").value for end in ("min", "max")]
         config = node.config
@@ -78,8 +80,9 @@ def test_the_planner_plans_with_its_parameters(profile, tmp_path):
         value["give_up_threshold"],
         compliant=value["compliant"],
         workspace=tuple(map(tuple, box)),
+        max_slide=value["max_slide"],
     )
-    assert config == expected
+    assert config == expected and config.max_slide == 0.45
 
 
 @pytest.mark.parametrize("profile", ["mock", "robot"])
@@ -91,6 +94,17 @@ def test_the_planner_plans_in_the_executors_workspace_box(profile):
         box = config["executor"]["ros__parameters"][end]
         assert config["planner"]["ros__parameters"][end] == box, end
         assert config["perception"]["ros__parameters"][end] == box, end
+
+
+@pytest.mark.parametrize("profile", ["mock", "robot"])
+def test_the_planner_knows_how_far_the_executor_may_slide(profile):
+    """A slide the executor reports by its first contact only leaves the tool up to its
+    ``max_slide`` from its moves; the planner steps back that far (``planner.retrace``), so
+    the profiles give planner and perception the executor's value."""
+    config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
+    slide = config["executor"]["ros__parameters"]["max_slide"]
+    assert config["planner"]["ros__parameters"]["max_slide"] == slide
+    assert config["perception"]["ros__parameters"]["max_slide"] == slide
 
 
 def test_an_unknown_problem_stops_mock_hardware(tmp_path):

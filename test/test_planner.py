@@ -1,5 +1,6 @@
 """Docking planner (Sec. V-B) on prior samples of the benchmark problems."""
 
+import dataclasses
 import re
 
 import numpy as np
@@ -107,33 +108,47 @@ def test_a_tool_on_the_outline_leaves_the_way_it_came():
         [Status.FREE, Status.FREE, Status.FREE, Status.FREE, Status.COLLIDE],
     )
     for start in ([0.0, 0.97], [0.0, 0.99], [0.003, 0.985], [0.02, 0.96]):  # the last: retreated
-        path = planner.retrace(history, np.array(start), space, 0.005)
+        path = planner.retrace(history, np.array(start), space, 0.005, 0.35)
         np.testing.assert_allclose(path[[0, -1]], [start, [0.0, 1.5]])
         assert len(path) <= 3 and np.allclose(path[1:, 0], 0.0)  # then along move 3
     deep = History([[0.0, 2.0], [0.0, 0.9]], [[0.0, 0.9], [0.0, 0.5]], [Status.FREE] * 2)
-    path = planner.retrace(deep, np.array([0.0, 0.5]), space, 0.005)  # (0, 0.9) is blocked
+    path = planner.retrace(deep, np.array([0.0, 0.5]), space, 0.005, 0.35)  # (0, 0.9) is blocked
     np.testing.assert_allclose(path, [[0.0, 0.5], [0.0, 0.9], [0.0, 2.0]])
-    assert planner.retrace(History(), np.array([0.0, 0.97]), space, 0.005) is None
-    assert planner.retrace(history, np.array([-0.5, 0.9]), space, 0.005) is None  # off every move
-    assert planner.retrace(history, np.array([0.3, 0.5]), space, 0.005) is None  # too far
+    assert planner.retrace(History(), np.array([0.0, 0.97]), space, 0.005, 0.35) is None
+    assert (
+        planner.retrace(history, np.array([-0.5, 0.9]), space, 0.005, 0.35) is None
+    )  # off every move
+    assert planner.retrace(history, np.array([0.3, 0.5]), space, 0.005, 0.35) is None  # too far
 
 
-def test_a_tool_a_slide_away_from_its_moves_steps_straight_back_to_them():
+@pytest.mark.parametrize("max_slide", [0.3, 0.6])
+def test_a_tool_a_slide_away_from_its_moves_steps_straight_back_to_them(max_slide):
     """A non-compliant slide run for evidence that stuck reports only its first contact: the
-    executor leaves the tool up to ``max_slide`` (0.3 m) plus its retreat from every recorded
-    move. ``retrace`` steps straight back to the latest move and follows it out; farther than
-    that reach, no move is the tool's."""
+    executor leaves the tool up to its ``max_slide`` plus its retreat from every recorded
+    move. The planner, told that ``max_slide`` (``PlannerConfig``), steps straight back to the
+    latest move and follows it out; farther than that reach, no move is the tool's."""
     block = shapely.box(-1.0, -1.0, 1.0, 1.0)
     space = FreeSpace(block, np.array([[1.0, 1.0], [-1.0, 1.0]]), False, np.array([0.0, 2.0]))
     history = History(
         [[0.0, 2.0], [0.0, 0.995]], [[0.0, 0.995], [0.0, 0.985]], [Status.FREE, Status.SLIP_LEFT]
     )
-    slid = np.array([-0.28, 0.99])  # slid 0.28 m left along the face, then retreated
-    path = planner.retrace(history, slid, space, 0.005)
-    np.testing.assert_allclose(path, [slid, [0.0, 0.995], [0.0, 2.0]])  # its nearest point
-    assert planner.RETRACE_REACH >= 0.3 + 0.02  # max_slide plus the retreat (config/*.yaml)
-    beyond = np.array([-planner.RETRACE_REACH - 0.01, 0.99])
-    assert planner.retrace(history, beyond, space, 0.005) is None
+    # the slip row dropped by the sampler: the tool leaves the way it came first (``_lead``)
+    state = dataclasses.replace(EpisodeState().record(history, 1), dropped=np.array([1]))
+    assert planner.RETRACE_MARGIN >= 0.02 + 0.02  # the retreat and the release
+    for slide in (0.05, max_slide - 0.01):
+        slid = np.array([-slide - 0.02, 0.99])  # slid left along the face, then retreated
+        path = planner._lead(space, slid, state, 0.005, max_slide)
+        np.testing.assert_allclose(path, [slid, [0.0, 0.995], [0.0, 2.0]])  # its nearest point
+    beyond = np.array([-max_slide - planner.RETRACE_MARGIN - 0.01, 0.99])
+    assert (
+        planner.retrace(history, beyond, space, 0.005, max_slide + planner.RETRACE_MARGIN) is None
+    )
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), "0.3", None])
+def test_a_bad_max_slide_is_refused(bad):
+    with pytest.raises(ValueError, match="max_slide"):
+        PlannerConfig(max_slide=bad)
 
 
 def test_retrace_crosses_from_a_plan_to_the_move_the_executor_retreated_along():
@@ -147,11 +162,11 @@ def test_retrace_crosses_from_a_plan_to_the_move_the_executor_retreated_along():
         [Status.FREE, Status.COLLIDE, Status.FREE, Status.COLLIDE],  # plan 2: from its retreat
     )
     start = np.array([0.49, 0.98])  # retreated along plan 2's move
-    path = planner.retrace(history, start, space, 0.005)
+    path = planner.retrace(history, start, space, 0.005, 0.35)
     np.testing.assert_allclose(path, [start, [0.0, 0.98], [0.0, 2.0]])
     assert not space.blocked(path[-1])[0]
     cut = History(history.a[2:], history.b[2:], history.status[2:])  # without plan 1's move
-    assert planner.retrace(cut, start, space, 0.005) is None
+    assert planner.retrace(cut, start, space, 0.005, 0.35) is None
 
 
 @pytest.mark.parametrize("name", problems.names())

@@ -23,6 +23,7 @@ import numpy as np
 
 from .history import History
 from .sampling import Deferral
+from .simulate import MAX_SLIDE_M
 
 OBJECTIVES = ("ours", "greedy", "window", "info_gain")  # planner.score
 
@@ -163,6 +164,9 @@ class PlannerConfig:
         workspace: ``((x_min, y_min), (x_max, y_max))`` in the plane, metres: the executor's
             box (its ``workspace_min/max``). A path with a waypoint outside is not planned (the
             executor would refuse the plan and end the episode ABORTED); None: no box.
+        max_slide: the executor's ``max_slide``, metres >= 0: how far a slide it reports only
+            by its first contact can carry the tool from its recorded moves (``planner.retrace``
+            reaches this plus ``planner.RETRACE_MARGIN``).
     """
 
     load: tuple[float, float] = (0.0, -1.0)
@@ -172,6 +176,7 @@ class PlannerConfig:
     compliant: bool = True
     max_path_attempts: int = 20
     workspace: tuple[tuple[float, float], tuple[float, float]] | None = None
+    max_slide: float = MAX_SLIDE_M
 
     def __post_init__(self) -> None:
         load = np.asarray(self.load, float).reshape(-1)
@@ -192,6 +197,8 @@ class PlannerConfig:
         attempts = self.max_path_attempts
         if isinstance(attempts, bool) or not isinstance(attempts, int | np.integer) or attempts < 1:
             raise ValueError(f"max_path_attempts must be >= 1, got {self.max_path_attempts}")
+        if not (isinstance(self.max_slide, int | float) and 0 <= self.max_slide < np.inf):
+            raise ValueError(f"max_slide must be finite and >= 0 metres, got {self.max_slide!r}")
         if self.workspace is not None:
             try:
                 box = np.asarray(self.workspace, float)

@@ -86,14 +86,13 @@ class Plan:
     rejected: int = 0  # samples dropped as inconsistent with a recorded slide (``move_ids``)
 
 
-# m: how far the executor's unrecorded motion after a contact can leave the tool from its
-# recorded moves (``retrace``): a non-compliant slide that reports only its first contact (up
-# to ``max_slide``, 0.3 m in both profiles), then its retreat and release (0.02 m each)
-RETRACE_REACH = 0.35
+# m: how far beyond the executor's ``max_slide`` its unrecorded motion after a contact can
+# leave the tool from its recorded moves (``retrace``): its retreat and release (0.02 m each)
+RETRACE_MARGIN = 0.05
 
 
 def retrace(
-    history: History, start: np.ndarray, space: FreeSpace, step: float
+    history: History, start: np.ndarray, space: FreeSpace, step: float, reach: float
 ) -> np.ndarray | None:
     """Path (L, 2) from ``start`` back along the tool's own free moves to a point outside the
     likely-obstacle region, or None.
@@ -102,7 +101,7 @@ def retrace(
     the end of the last one; the executor: after its retreat, 0.02 m by default, which is not
     recorded), where the posterior's margin often covers it; when ``FreeSpace.ascend`` finds
     no way out (the tool sits on the mean outline), the tool leaves the way it came. It steps
-    to the nearest point of the latest free observation within RETRACE_REACH metres, follows
+    to the nearest point of the latest free observation within ``reach`` metres, follows
     it back to its start, then earlier ones passing within ``step`` of where the walk stands,
     each back to its start (free observations are recorded in move order, each starting where
     the previous one ended, or, for a plan's first move, where the executor's unrecorded
@@ -111,7 +110,8 @@ def retrace(
     Not a hot path: one walk over the history per plan.
 
     The first step undoes the retreat, or a non-compliant slide the executor ran for evidence
-    and reported only as its first contact: a straight, guarded step back. Measured
+    and reported only as its first contact: a straight, guarded step back, so ``reach`` is
+    the executor's ``max_slide`` plus RETRACE_MARGIN (``_lead``). Measured
     2026-11-28 (``bench episode`` on the mock profile, depth prior): with a reach of 0.05 m,
     3 of 4 feasible notch truths gave up "with no way out" after such a slide of 0.1-0.2 m.
     """
@@ -121,7 +121,7 @@ def retrace(
     along = b - a
     t = np.sum((start - a) * along, axis=1) / np.maximum(np.sum(along**2, axis=1), 1e-18)
     nearest = a + np.clip(t, 0.0, 1.0)[:, None] * along
-    near = np.flatnonzero(np.linalg.norm(nearest - start, axis=1) <= RETRACE_REACH)
+    near = np.flatnonzero(np.linalg.norm(nearest - start, axis=1) <= reach)
     if near.size == 0:
         return None
     path = [start] if np.allclose(nearest[near[-1]], start) else [start, nearest[near[-1]]]
@@ -140,7 +140,7 @@ def retrace(
 
 
 def _lead(
-    space: FreeSpace, start: np.ndarray, state: EpisodeState, step: float
+    space: FreeSpace, start: np.ndarray, state: EpisodeState, step: float, max_slide: float
 ) -> np.ndarray | None:
     """The path's first part: ``start`` alone in free space, else a way out of the
     likely-obstacle region (``FreeSpace.ascend``, then ``retrace``), or None.
@@ -150,15 +150,16 @@ def _lead(
     back of a hold, and every contact there was dropped), so the tool first leaves the way it
     came, free or not.
     """
+    reach = max_slide + RETRACE_MARGIN
     newest = int(state.move_ids.max(initial=0))  # 0: rows of unknown moves (slides too)
     if newest > 0 and np.isin(np.flatnonzero(state.move_ids == newest), state.ignored).any():
-        lead = retrace(state.history, start, space, step)
+        lead = retrace(state.history, start, space, step, reach)
         if lead is not None:
             return lead
     if not space.blocked(start)[0]:
         return np.array([start])
     lead = space.ascend(start, step)
-    return retrace(state.history, start, space, step) if lead is None else lead
+    return retrace(state.history, start, space, step, reach) if lead is None else lead
 
 
 def exploration_bonus(aim: np.ndarray, previous: np.ndarray, width: float) -> np.ndarray:
@@ -463,7 +464,7 @@ def plan(
             f"best docking probability {best:.2e} < threshold {config.give_up_threshold:g}",
             candidates,
         )
-    lead = _lead(space, start, state, step)
+    lead = _lead(space, start, state, step, config.max_slide)
     if lead is None:
         return _give_up(rejected, NO_WAY_OUT)
     values = score(

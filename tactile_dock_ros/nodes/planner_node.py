@@ -110,6 +110,15 @@ PARAMS = [
         length=2,
     ),
     Param("workspace_max", [1.0, 1.0], "executor's box, upper corner (plane x, y)", "m", length=2),
+    Param(
+        "max_slide",
+        PlannerConfig.max_slide,
+        "executor's max_slide: how far an unreported slide can carry the tool from its moves "
+        "(the step back to them reaches this + 0.05 m)",
+        "m",
+        0.0,
+        2.0,
+    ),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
     Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
     MAX_HOLDS,
@@ -129,7 +138,7 @@ GOAL_OVERRIDES = ("max_cycles", "give_up_threshold", "compliant")  # Dock goal f
 # the parameters planner_config maps (perception and tools.replay declare and read the same)
 CONFIG_SETTINGS = (
     "load_direction", "give_up_threshold", "contact_resolution", "compliant", "workspace_min",
-    "workspace_max",
+    "workspace_max", "max_slide",
 )  # fmt: skip
 
 
@@ -145,6 +154,7 @@ def planner_config(p) -> PlannerConfig:
         give_up_threshold=p.give_up_threshold,
         compliant=p.compliant,
         workspace=(tuple(p.workspace_min), tuple(p.workspace_max)),
+        max_slide=p.max_slide,
     )
 
 
