@@ -5,6 +5,7 @@ no report is redelivered, restores the episode's history from its journal alone;
 takes reports and publishes the history while a sampling call is still running.
 """
 
+import dataclasses
 import threading
 from functools import partial
 
@@ -17,8 +18,9 @@ from std_msgs.msg import UInt32
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 
 from tactile_dock_ros.core import problems
+from tactile_dock_ros.core.sampling import Deferral
 from tactile_dock_ros.execution.types import Report
-from tactile_dock_ros.nodes import convert, inference_node, qos
+from tactile_dock_ros.nodes import convert, inference_node, qos, warm_start
 
 pytestmark = pytest.mark.dds
 EPISODE = 41
@@ -73,8 +75,8 @@ def test_a_restarted_node_restores_the_episode_history_from_its_journal(tmp_path
 
 def test_a_restarted_node_samples_warm_from_its_saved_posterior(tmp_path, monkeypatch):
     """The posterior of the killed node's last cycle is the restarted node's warm start once
-    the same prior and episode id arrive (no report redelivered); the same prior sent again
-    keeps the warm start, another prior drops it."""
+    the same prior and episode id arrive (no report redelivered), with its deferred rows; the
+    same prior sent again keeps the warm start, another prior drops it."""
     spec = launch_nodes("mock", state_directory=str(tmp_path / "state"))["inference"]
     args = ["-p", "inference:num_samples:=8"]
     with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
@@ -89,12 +91,19 @@ def test_a_restarted_node_samples_warm_from_its_saved_posterior(tmp_path, monkey
         assert spin_until(executor, lambda: samples and samples[-1].history_length == 2, 30.0)
         saved = node.episode_state.warm_start
     assert saved is not None and len(saved) == 8
+    # as if the killed node's seed search had deferred row 1: the snapshot carries it
+    state_dir = tmp_path / "state"
+    snapshot = warm_start.load(state_dir)
+    untried = np.random.default_rng(3).standard_normal((2, snapshot.z.shape[1]))
+    deferral = Deferral(np.array([1]), np.array([2]), untried)
+    warm_start.save(state_dir, dataclasses.replace(snapshot, deferral=deferral))
 
-    starts = []  # init_z of every sampling call of the restarted node
+    starts, deferrals = [], []  # init_z and deferral of every call of the restarted node
 
-    def recording_sampler(prior, history, *args, init_z=None, **kwargs):
+    def recording_sampler(prior, history, *args, init_z=None, deferral=None, **kwargs):
         starts.append(init_z)
-        return real_sampler(prior, history, *args, init_z=init_z, **kwargs)
+        deferrals.append(deferral)
+        return real_sampler(prior, history, *args, init_z=init_z, deferral=deferral, **kwargs)
 
     real_sampler = inference_node.sample_posterior
     monkeypatch.setattr(inference_node, "sample_posterior", recording_sampler)
@@ -105,6 +114,10 @@ def test_a_restarted_node_samples_warm_from_its_saved_posterior(tmp_path, monkey
         episode.publish(UInt32(data=EPISODE))
         assert spin_until(executor, lambda: starts, 30.0)
         np.testing.assert_array_equal(starts[0], saved)  # bit-exact, not a cold start
+        restored = deferrals[0]  # the search goes on where it stopped, its effort kept
+        np.testing.assert_array_equal(restored.rows, [1])
+        np.testing.assert_array_equal(restored.effort, [2])
+        np.testing.assert_array_equal(restored.starts, untried)
         prior.publish(_prior_msg())  # re-delivered (e.g. perception restarted): kept
         assert spin_until(executor, lambda: len(starts) >= 2, 30.0)
         assert starts[1] is not None

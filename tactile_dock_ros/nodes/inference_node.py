@@ -247,13 +247,13 @@ class InferenceNode(Node):
             self.get_logger().info(f"saved posterior not used ({reason}): sampling cold")
             return
         try:
-            self.episode_state = self.episode_state.sampled(saved.z, saved.dropped)
-        except ValueError as err:  # e.g. dropped rows outside the history
+            self.episode_state = self.episode_state.sampled(saved.z, saved.dropped, saved.deferral)
+        except ValueError as err:  # e.g. dropped or deferred rows outside the history
             self.get_logger().error(f"saved posterior not used ({err}): sampling cold")
             return
         self.get_logger().info(
             f"warm start restored: {len(saved.z)} posterior samples of {saved.history_length} "
-            f"of the {rows} history rows"
+            f"of the {rows} history rows, {len(saved.deferral)} of them deferred"
         )
 
     def on_episode_status(self, msg: EpisodeStatus) -> None:
@@ -409,7 +409,9 @@ class InferenceNode(Node):
     def save_warm_start(self, episode: int, rows: int, fingerprint: str, posterior) -> None:
         """Save the posterior for a restart (``nodes.warm_start``); a failure is logged, the
         node goes on (a restart would then sample cold)."""
-        saved = warm_start.WarmStart(episode, rows, fingerprint, posterior.z, posterior.dropped)
+        saved = warm_start.WarmStart(
+            episode, rows, fingerprint, posterior.z, posterior.dropped, posterior.deferral
+        )
         try:
             warm_start.save(self.p.state_directory, saved)
         except journal.JournalError as err:
