@@ -327,8 +327,8 @@ def split_exits(threads, lin0, linp, tables, span, phi, to_quartic, structure):
 
     Decision (not in the paper): round-robin, not contiguous blocks, because a chain's cost
     varies with its bounces and neighbouring chains share seeds; on the calls of a late
-    depth-prior three_ledges cycle (16 chains) contiguous halves gained 1.3x on 2 cores,
-    round-robin 1.45x (2026-11-28, one-off timing)."""
+    depth-prior three_ledges cycle (16 chains) on 2 cores, contiguous halves took 0.73x of
+    one thread, round-robin 0.68x (2026-11-28, medians of 5 timings)."""
     n_chains = lin0.shape[0]
     if threads < 2 or n_chains < 2 * threads or n_chains * tables[0].shape[0] < SPLIT_MIN_WORK:
         return window_exits(lin0, linp, tables, span, phi, to_quartic, structure)
