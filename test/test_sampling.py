@@ -98,11 +98,7 @@ def test_samplers_agree_with_rejection_on_vertex_means(sloper_case):
 
 def test_inconsistent_history_drops_the_offending_observation(sloper_case):
     problem, history = sloper_case
-    contact = history.a[1], history.b[1]
-    mid = 0.5 * (contact[0] + contact[1])
-    # a free move straight through the felt contact point: no shape satisfies both
-    up = np.array([0.0, 0.2])
-    bad = history.extend([mid + up], [mid - up], [Status.FREE])
+    bad = _through_a_felt_contact(history)  # no shape satisfies both
     assert not history_consistent(
         False,
         problem.prior.vertices(problem.prior.sample_z(np.random.default_rng(0), 2000)),
@@ -218,7 +214,15 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
     few = np.vstack([before.z[consistent][:2], before.z[~consistent][:4]])
     out = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=few)
     assert out.info["warm_seeds"] == 2 and out.info["distinct_seeds"] >= sampling.SEED_MIN_DISTINCT
+    assert out.info["burn_in"] == 3  # some chains start from descent seeds
     assert history_consistent(False, out.vertices, history, problem.friction).all()
+    # five consistent rows for 16 chains: shared round-robin, no descent, the warm burn-in
+    shared = sample_posterior(
+        shape, history, 60, np.random.default_rng(6), init_z=before.z[consistent][:5]
+    )
+    assert shared.info["warm_seeds"] == 5 and shared.info["distinct_seeds"] == 5
+    assert shared.info["burn_in"] == 1
+    assert history_consistent(False, shared.vertices, history, problem.friction).all()
     # no row consistent: descent starts from them, default burn-in
     bad = before.z[~consistent][:3]
     out = sample_posterior(shape, history, 30, np.random.default_rng(6), init_z=bad)
@@ -427,6 +431,43 @@ def _descent_seeds(problem, history, mean, std):
     ok = (count == 0) & history_consistent(False, shape.vertices(z), history, shape.friction)
     dev = np.max(np.abs(shape.vertices(z).reshape(len(z), -1) - mean) / std, axis=1)
     return z[ok], dev[ok]
+
+
+def _through_a_felt_contact(history):
+    """``history`` and a free move straight through its second row's contact: inconsistent."""
+    mid, up = 0.5 * (history.a[1] + history.b[1]), np.array([0.0, 0.2])
+    return history.extend([mid + up], [mid - up], [Status.FREE])
+
+
+def test_a_descent_restart_ends_once_no_descent_improves(sloper_case, monkeypatch):
+    """With ``patience`` a descent batch stops when no violated row has lowered its count for
+    that many steps: a free move through a felt contact can never be fitted, so every descent
+    stalls, and the batch ends long before ``max_iters`` (without patience it runs them all).
+    On a history that fits, the descents still reach feasible states."""
+    problem, history = sloper_case
+    shape = problem.prior
+    bad = _through_a_felt_contact(history)
+    system = HistoryConstraints(shape, bad, prune_pairs(shape, bad, 1e-4))
+    steps = []
+    step = sampling._descent_step
+
+    def counted(*args):
+        steps.append(1)
+        return step(*args)
+
+    monkeypatch.setattr(sampling, "_descent_step", counted)
+    z0 = sampling._contact_projection(shape, bad, shape.sample_z(np.random.default_rng(3), 8))
+    patience = sampling.DESCENT_PATIENCE
+    z, count = sampling.random_descent(system, z0, np.random.default_rng(4), 200, None, patience)
+    assert np.all(count > 0) and np.array_equal(count, sampling._violated_count(system, z))
+    assert patience <= len(steps) < 100, len(steps)
+    steps.clear()
+    sampling.random_descent(system, z0, np.random.default_rng(4), 200)
+    assert len(steps) == 200
+    system = HistoryConstraints(shape, history, prune_pairs(shape, history, 1e-4))
+    z0 = sampling._contact_projection(shape, history, shape.sample_z(np.random.default_rng(5), 16))
+    z, count = sampling.random_descent(system, z0, np.random.default_rng(6), 60, None, patience)
+    assert np.sum(count == 0) >= 4
 
 
 def _pocket_state(problem, history, mean, std):
@@ -794,9 +835,7 @@ def test_an_inconsistent_row_is_dropped_after_the_one_call_searchs_effort(sloper
     """A free move through a felt contact: calls 1-7 defer it (one failed restart each), the
     8th drops it, as the one-call search of 8 restarts did at once."""
     problem, history = sloper_case
-    mid = 0.5 * (history.a[1] + history.b[1])
-    up = np.array([0.0, 0.2])
-    bad = history.extend([mid + up], [mid - up], [Status.FREE])
+    bad = _through_a_felt_contact(history)
     rng, deferral, z = np.random.default_rng(2), None, None
     for call in range(sampling.SEED_RESTARTS_DEFAULT):
         out = sample_posterior(

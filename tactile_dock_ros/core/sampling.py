@@ -82,6 +82,7 @@ NODE_METHODS = tuple(name for name, s in SAMPLERS.items() if s.on_node)
 LINE_HALF_WIDTH = 9.0  # line scans cover the conditional mean +- this many std (mass < 1e-18 lost)
 DESCENT_HALF_WIDTH = 3.0  # descent line scans: +- this many std (a seed, not a Gibbs draw)
 DESCENT_CANDIDATES = 32  # segments per descent step judged against every observation
+DESCENT_PATIENCE = 10  # seed search: a restart ends when no descent improved for this many steps
 SEED_DESCENTS = 8  # descents per seeding restart (chains beyond share their seeds)
 SEED_RESTARTS_DEFAULT = 8  # failed descent restarts on a row before it is dropped
 SEED_ROUND_RESTARTS = 1  # failed restarts per seed-search round of one call (then: deferred)
@@ -479,7 +480,12 @@ def _descent_step(system, z, pick, d, count_now, rng) -> np.ndarray:
 
 
 def random_descent(
-    system, z: np.ndarray, rng: np.random.Generator, max_iters: int = 60, enough: int | None = None
+    system,
+    z: np.ndarray,
+    rng: np.random.Generator,
+    max_iters: int = 60,
+    enough: int | None = None,
+    patience: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Random descent of f_H (Sec. IV-D) from states z (C, m): returns (z, violated counts).
 
@@ -489,15 +495,26 @@ def random_descent(
     without disturbing the rest). The state jumps along that axis to a point, drawn from the
     prior along the line, of a segment with the fewest violated observations among the
     candidates of ``_descent_step``: the count never increases. Stops when ``enough`` rows
-    (default all) are feasible.
+    (default all) are feasible, or, with ``patience``, when no row still violated has lowered
+    its count for that many iterations.
+
+    Decision (2026-11-28; the seed search passes DESCENT_PATIENCE): a descent that stalls
+    rarely recovers. On sloper train truth 5 (depth prior, compliant, episode seed 0, cycle
+    1, 24 rows; one-off trace of 64 descents over 120 iterations) the 5 that reached
+    feasibility did so at iterations 3, 4, 6, 8 and 96; 56 of the 59 others last lowered their
+    count by iteration 9. A restart whose descents all fail no longer runs its 60 iterations:
+    on the same histories a failed retry of deferred rows took 0.13-0.32 s instead of
+    0.73-1.0 s (sloper truth 5, non-compliant, episode seed 2, cycle 6), a restart topping up
+    distinct seeds 0.04-0.10 s instead of 0.17-0.21 s.
     """
     z = np.array(z, dtype=float)
     m = z.shape[1]
     count = _violated_count(system, z)
     enough = len(z) if enough is None else enough
+    stalled = 0  # iterations since any row's count last dropped
     for _ in range(max_iters):
         todo = np.flatnonzero(count > 0)
-        if len(z) - todo.size >= enough:
+        if len(z) - todo.size >= enough or (patience is not None and stalled >= patience):
             break
         values = system.values(z[todo])
         viol = system.violations(values) > 0
@@ -509,7 +526,9 @@ def random_descent(
         d = np.zeros((todo.size, m))
         d[np.arange(todo.size), axis] = 1.0
         z[todo] = _descent_step(system, z[todo], pick, d, count[todo], rng)
-        count[todo] = _violated_count(system, z[todo])
+        now = _violated_count(system, z[todo])
+        stalled = 0 if np.any(now < count[todo]) else stalled + 1
+        count[todo] = now
     return z, count
 
 
@@ -646,6 +665,7 @@ class _Seeds:
     warm: int = 0  # distinct warm-start rows used
     distinct: int = 0  # distinct seeds
     screened: int = 0  # feasible descent seeds discarded as atypical (``_typical``)
+    descended: int = 0  # chains seeded by descent (the others: exact seeds or warm rows)
 
 
 def _seed(
@@ -689,7 +709,8 @@ def _seed(
        free pairs are pruned under their widened moment fit as well (``_posterior_pruned``);
     3. the remaining chains get one descent each: prior draws projected onto the contacts,
        then random descent. Beyond SEED_DESCENTS remaining chains, SEED_DESCENTS descents run
-       per restart, stop once half of them are feasible, and the chains share the descent
+       per restart, stop once half of them are feasible or none has lowered its violated
+       count for DESCENT_PATIENCE steps (``random_descent``), and the chains share the descent
        seeds round-robin (descents are the costly part of seeding). A feasible descent
        seed far less likely under the prior than the typical seed (``_typical``; exact and
        warm seeds count as typical) is discarded; descents restart until SEED_MIN_DISTINCT
@@ -733,7 +754,7 @@ def _seed(
             start = np.vstack([start, shape.sample_z(rng, tries - len(start))])
         z0 = _contact_projection(shape, history, start)
         enough = tries if tries == chains - len(pool) else max(1, tries // 2)
-        z, count = random_descent(system, z0, rng, max_iters, enough=enough)
+        z, count = random_descent(system, z0, rng, max_iters, enough, DESCENT_PATIENCE)
         ok = (count == 0) & _consistent_rows(shape, history, z)
         # pairs the pruned set missed: add the ones these states violate
         free = full.structure.free_pair
@@ -767,6 +788,7 @@ def _seed(
             distinct=len(pool) + len(good),
             screened=len(found) - len(good),
             restarts=ran,
+            descended=chains - len(pool),
         )
     if len(pool):  # descent failed, but some chains have exact or warm seeds: share those
         share = np.arange(chains) % len(pool)
@@ -1076,9 +1098,13 @@ def sample_posterior(
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest
     observations, seeds the chains that exact seeds leave (``_seed``): its rows consistent with
     the history (the previous posterior filtered by the new observations, i.e. already draws
-    of the new one) are used directly, and when the chains with exact seeds and the warm rows
-    used are at least ``chains`` the default burn-in drops to 1 move (HMC, Gibbs) / 50 steps
-    (MH); otherwise descent starts from its rows.
+    of the new one) are used directly, and when no chain starts from a descent seed (every
+    seed is an exact seed or a warm row, rows shared round-robin when fewer than the chains)
+    the default burn-in drops to 1 move (HMC, Gibbs) / 50 steps (MH); otherwise descent
+    starts from its rows. Decision (2026-11-28): a chain that starts on a posterior draw
+    needs no burn-in to reach its target; two chains that share one only start alike, which
+    the discarded move and their own momenta undo. Before, 13-15 warm rows for 16 chains
+    (late depth-prior three_ledges cycles) paid the 3 moves of descent seeds.
     """
     start = time.perf_counter()
     if method not in METHODS:
@@ -1183,7 +1209,7 @@ def sample_posterior(
     left = _deferral(set_aside, untried)
 
     per_chain = -(-n_samples // chains)
-    warm = init_z is not None and seeds.warm + int(seeds.exact.sum()) >= chains
+    warm = init_z is not None and seeds.descended == 0
     if burn_in is None:
         burn_in = SAMPLERS[method].burn_in[int(warm)]
     max_steps = 50 * per_chain + 1000 if max_steps is None else max_steps
