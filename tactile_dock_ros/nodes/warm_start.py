@@ -116,9 +116,8 @@ def _deferral(data) -> Deferral:
     """The saved deferral (none in a file written before it was saved); ValueError if bad."""
     if "deferred_rows" not in data:
         return Deferral()
-    starts = np.array(data["deferred_starts"], dtype=float)
-    return Deferral(
+    return Deferral(  # no rows of starts (saved as (0, m)): None, as ``Deferral`` makes it
         np.array(data["deferred_rows"], dtype=int),
         np.array(data["deferred_effort"], dtype=int),
-        starts if len(starts) else None,
+        np.array(data["deferred_starts"], dtype=float),
     )
