@@ -503,9 +503,9 @@ def random_descent(
     1, 24 rows; one-off trace of 64 descents over 120 iterations) the 5 that reached
     feasibility did so at iterations 3, 4, 6, 8 and 96; 56 of the 59 others last lowered their
     count by iteration 9. A restart whose descents all fail no longer runs its 60 iterations:
-    on the same histories a failed retry of deferred rows took 0.13-0.32 s instead of
-    0.73-1.0 s (sloper truth 5, non-compliant, episode seed 2, cycle 6), a restart topping up
-    distinct seeds 0.04-0.10 s instead of 0.17-0.21 s.
+    a failed retry of deferred rows took 0.13-0.32 s instead of 0.73-1.0 s (sloper truth 5,
+    non-compliant, episode seed 2, cycles 6-8 of each version's episode), a restart topping up
+    distinct seeds 0.04-0.10 s instead of 0.17-0.21 s (the history above).
     """
     z = np.array(z, dtype=float)
     m = z.shape[1]
