@@ -6,9 +6,12 @@ import threading
 import numpy as np
 import pytest
 from constraint_cases import history_system, linear_system
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tactile_dock_ros.core import hmc_exit, intervals
 from tactile_dock_ros.core.constraint_systems import HistoryConstraints
+from tactile_dock_ros.core.constraints import quad
 
 CASES = {
     "notch, live-pair judging": lambda: history_system("notch", 3, np.linspace(-0.25, 0.25, 6)),
@@ -17,6 +20,13 @@ CASES = {
     # vanish, exact only from a feasible start, as in the HMC loop
     "linear inequalities": linear_system,
 }
+
+
+def _fresh(system, n_chains: int) -> tuple:
+    """``window_exits``' ``certs`` for n chains without certificates yet."""
+    n_edges = system.ellipse_terms(np.zeros((1, system.n_dim)), np.zeros((1, system.n_dim)))[0]
+    travel, safe = hmc_exit.certificates(n_chains, n_edges.shape[1], system.n_pairs)
+    return travel, safe, np.arange(n_chains)
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -43,7 +53,7 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
     phi = 0.5 * float(span.max())
     got = hmc_exit.window_exits(
         *system.ellipse_terms(z, p), system.window_tables, span, phi,
-        intervals.trig_to_quartic(phi), system.exit_structure,
+        intervals.trig_to_quartic(phi), system.exit_structure, _fresh(system, len(z)),
     )  # fmt: skip
     got_hit, got_dt, got_owner, got_stuck = got
     assert 0 < hit.sum() < len(z)  # some ellipses leave the feasible set, some do not
@@ -64,7 +74,8 @@ def test_first_exit_matches_judging_every_segment_of_every_primitive(case):
 
 
 def _split_case():
-    """The notch case's window-exit arguments on short windows (some chains leave)."""
+    """The notch case's window-exit arguments on short windows (some chains leave); the
+    certificates fresh on each use of the tuple's last item (a callable)."""
     system, z = CASES["notch, live-pair judging"]()
     rng = np.random.default_rng(11)
     p = rng.standard_normal(z.shape)
@@ -72,14 +83,14 @@ def _split_case():
     phi = 0.5 * float(span.max())
     return (
         *system.ellipse_terms(z, p), system.window_tables, span, phi,
-        intervals.trig_to_quartic(phi), system.exit_structure,
+        intervals.trig_to_quartic(phi), system.exit_structure, lambda n: _fresh(system, n),
     )  # fmt: skip
 
 
 def _chains(args, n):
-    """The first n chains of ``window_exits`` arguments."""
-    lin0, linp, tables, span, *rest = args
-    return (lin0[:n], linp[:n], tables, span[:n], *rest)
+    """The first n chains of ``_split_case``'s arguments, with fresh certificates."""
+    lin0, linp, tables, span, *rest, fresh = args
+    return (lin0[:n], linp[:n], tables, span[:n], *rest, fresh(n))
 
 
 @pytest.mark.parametrize("threads", [2, 3])
@@ -90,7 +101,7 @@ def test_exit_search_split_over_threads_gives_the_same_exits(threads, monkeypatc
     Calls too small to be worth it (SPLIT_MIN_WORK) or with under 2 chains a part: one call."""
     args = _split_case()
     n_chains, n_prims = len(args[0]), len(args[2][0])
-    whole = hmc_exit.window_exits(*args)
+    whole = hmc_exit.window_exits(*_chains(args, n_chains))
     assert 0 < whole[0].sum() < n_chains
     seen = []
     search = hmc_exit.window_exits
@@ -101,7 +112,7 @@ def test_exit_search_split_over_threads_gives_the_same_exits(threads, monkeypatc
 
     monkeypatch.setattr(hmc_exit, "window_exits", recorded)
     monkeypatch.setattr(hmc_exit, "SPLIT_MIN_WORK", n_chains * n_prims)
-    split = hmc_exit.split_exits(threads, *args)
+    split = hmc_exit.split_exits(threads, *_chains(args, n_chains))
     for got, want in zip(split, whole, strict=True):
         assert got.dtype == want.dtype
         np.testing.assert_array_equal(got, want)
@@ -122,10 +133,11 @@ def test_a_forked_process_splits_on_its_own_threads(monkeypatch):
     """A process forked after its parent split a search (``bench docking --workers``) has none
     of the parent's pool threads: it makes its own instead of waiting for them forever."""
     monkeypatch.setattr(hmc_exit, "SPLIT_MIN_WORK", 0)
-    args = _split_case()
+    args = _chains(_split_case(), 8)
     whole = hmc_exit.split_exits(2, *args)  # the parent's pool exists now
     context = multiprocessing.get_context("fork")
     queue = context.Queue()
+    args = _chains(_split_case(), 8)  # fresh certificates: the same call as the parent's
     child = context.Process(target=_split_in_child, args=(args, queue))
     child.start()
     try:
@@ -148,19 +160,88 @@ def test_window_filter_skips_most_primitives_on_short_windows(case):
     lin0, linp = system.ellipse_terms(z, p)
     plain = system.exit_structure[-1]
     coef = np.empty((5, system.n_prims))
-    solve = np.empty(system.n_prims, dtype=bool)
-    live = np.empty(system.n_pairs, dtype=bool)
+    found = (
+        np.empty(system.n_prims, dtype=np.int64),
+        np.empty(system.n_pairs, dtype=np.int64),
+        np.empty(len(system.exit_structure[3]), dtype=bool),
+    )
     quad, bern = np.empty((lin0.shape[1], 3)), np.empty((5, 5))
+    travel, safe, _ = _fresh(system, 1)
     kept = []
     for c in range(len(z)):
+        safe[:] = -np.inf
         hmc_exit._chain_terms(lin0[c], linp[c], plain, quad)
-        hmc_exit._chain_window(
-            lin0[c], linp[c], quad, system.window_tables, 0.15, bern, system.exit_structure,
-            coef, solve, live,
+        n_solve, _ = hmc_exit._chain_window(
+            (lin0[c], linp[c], quad), system.window_tables, 0.15, bern, system.exit_structure,
+            coef, found, (travel[0], np.zeros((lin0.shape[1], 2)), safe[0]), True,
         )  # fmt: skip
         np.testing.assert_allclose(coef, system.ellipse_coefficients(z[c : c + 1], p[c : c + 1])[0])
-        kept.append(solve.mean())
+        kept.append(n_solve / system.n_prims)
     assert np.median(kept) < 0.25
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_certificates_skip_pairs_and_keep_every_exit(case):
+    """Along trajectories of many short windows with bounces (as ``sampling.hmc_chains``
+    runs them), the search that keeps its certificates from window to window finds, in
+    every window, the exits of a search without any: whether, when, on which primitive; and
+    its certificates do cover pairs (most of them, after a few windows). A certificate is
+    honoured: every pair certified far beyond any travel leaves nothing to build or judge."""
+    system, z = CASES[case]()
+    rng = np.random.default_rng(3)
+    p = rng.standard_normal(z.shape)
+    kept = _fresh(system, len(z))
+    span = np.full(len(z), 0.05)
+    phi = 0.025
+    covered = []
+    for _ in range(40):
+        lin0, linp = system.ellipse_terms(z, p)
+        args = (lin0, linp, system.window_tables, span, phi, intervals.trig_to_quartic(phi))
+        reach = np.linalg.norm(lin0, axis=-1) * (1 - np.cos(span[:, None]))
+        reach += np.linalg.norm(linp, axis=-1) * np.sin(span[:, None])
+        edge = system.window_tables[7]
+        travel, safe = kept[0], kept[1]
+        covered.append(np.mean(safe > travel[:, edge] + reach[:, edge]))
+        got = hmc_exit.window_exits(*args, system.exit_structure, kept)
+        want = hmc_exit.window_exits(*args, system.exit_structure, _fresh(system, len(z)))
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+        hit, dt, owner, stuck = want
+        t = dt[:, None]
+        z, p = z * np.cos(t) + p * np.sin(t), p * np.cos(t) - z * np.sin(t)
+        bounce = hit & ~stuck
+        if bounce.any():
+            g = system.gradient(z[bounce], owner[bounce])
+            u = g / np.linalg.norm(g, axis=1, keepdims=True)
+            p[bounce] -= 2 * u * np.sum(u * p[bounce], axis=1, keepdims=True)
+    assert np.mean(covered[10:]) > 0.5
+    everything = (kept[0], np.full_like(kept[1], np.inf), kept[2])
+    hit, dt, owner, stuck = hmc_exit.window_exits(*args, system.exit_structure, everything)
+    assert np.all(owner == -1) and np.all(dt[~stuck] == span[~stuck])
+    if isinstance(system, HistoryConstraints):  # contacts without a live pair: violated
+        assert np.all(stuck)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(-1, 1).filter(lambda g: abs(g) > 1e-6),
+    st.lists(st.floats(-2, 2), min_size=4, max_size=4),
+    st.sampled_from([-1.0, 0.0, 1.0]),
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    st.floats(0, 1),
+)
+def test_a_primitive_keeps_its_sign_within_its_clearance(g0, w, s, y0, v, fraction):
+    """``_clearance``: moving an edge's ends (y0 -> y0 + v) by less than the clearance of a
+    primitive g(y) = g0 + w.(y - y0) + s (quad(y) - quad(y0)) keeps its sign."""
+    w, y0, v = np.array(w), np.array(y0), np.array(v)
+    reach = hmc_exit._clearance(g0, np.linalg.norm(w), s, np.linalg.norm(y0))
+    assert reach >= 0
+    if np.linalg.norm(v) == 0 or not np.isfinite(reach):
+        return
+    step = v / np.linalg.norm(v) * reach * fraction
+    moved = g0 + w @ step + s * (quad(y0 + step) - quad(y0))
+    assert np.sign(moved) == np.sign(g0)
 
 
 def test_bernstein_map_proves_a_sign_only_where_there_is_no_root():
@@ -188,3 +269,21 @@ def test_bernstein_map_proves_a_sign_only_where_there_is_no_root():
     g = np.einsum("cti,cik->ctk", intervals.trig_basis(t), coef)  # (50, 33, 40)
     keeps = np.all(g * np.sign(bern[:, :1]) > 0, axis=1)
     assert np.all(keeps[proven])
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+    st.floats(0, np.pi / 2),
+)
+def test_an_edge_moves_no_further_than_its_reach(y0, yp, t):
+    """``_reach``: the path length of y0 cos s + yp sin s over [0, t] is at most
+    |y0| (1 - cos t) + |yp| sin t, the bound the certificates' travel adds up."""
+    y0, yp = np.array([y0]), np.array([yp])
+    speed = np.empty((1, 2))
+    hmc_exit._edge_speeds(y0, yp, speed)
+    s = np.linspace(0, t, 2001)
+    velocity = np.linalg.norm(-np.sin(s)[:, None] * y0 + np.cos(s)[:, None] * yp, axis=1)
+    path = np.sum(0.5 * (velocity[1:] + velocity[:-1]) * np.diff(s))
+    assert path <= hmc_exit._reach(speed, 0, 1 - np.cos(t), np.sin(t)) + 1e-9

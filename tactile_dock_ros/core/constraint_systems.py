@@ -87,7 +87,7 @@ class HistoryConstraints(_TrigSystem):
         # L_k . z = grad_mean_k . (edge coordinates of A z): 4 terms per primitive, not m
         prim_edge = self._pair_edge[self.prim_pair]
         self.window_tables = hmc_exit.tables(
-            grad_mean, prim_edge, self._g_mean, self._psign, prim_edge
+            grad_mean, prim_edge, self._g_mean, self._psign, prim_edge, self._prim_index
         )
 
     def _y(self, z: np.ndarray) -> np.ndarray:
@@ -203,7 +203,7 @@ class LinearConstraints(_TrigSystem):
         )
         k = self.n_prims  # k1 = F_k . z: one "edge" per primitive, no quadratic term
         self.window_tables = hmc_exit.tables(
-            np.ones((k, 1)), np.arange(k), self.h, np.zeros(k), np.zeros(k)
+            np.ones((k, 1)), np.arange(k), self.h, np.zeros(k), np.zeros(k), each[:, None]
         )
 
     def values(self, z: np.ndarray) -> np.ndarray:

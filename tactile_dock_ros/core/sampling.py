@@ -30,7 +30,7 @@ from .convergence import (
 )
 from .ess import effective_sample_size
 from .history import History
-from .hmc_exit import split_exits
+from .hmc_exit import certificates, split_exits
 from .intervals import (
     line_roots,
     line_scan,
@@ -260,6 +260,7 @@ def hmc_chains(
     left = dur.copy()
     bounced = np.zeros(c, dtype=int)
     moved = np.zeros(c)  # rad travelled in the current move
+    travel, safe = certificates(c, system.ellipse_terms(z[:1], p[:1])[0].shape[1], system.n_pairs)
     stats = {"bounces": 0, "rejected": 0, "travel": 0.0}
     move_max = float(np.max(duration))  # the longest move: the look-ahead bound
     if window is None:
@@ -285,6 +286,7 @@ def hmc_chains(
             phi,
             trig_to_quartic(phi),
             system.exit_structure,
+            (travel, safe, idx),
         )
         stats["travel"] += float(dt.sum())
         moved[idx] += dt
@@ -322,6 +324,7 @@ def hmc_chains(
             left[fin] = dur[fin]
             bounced[fin] = 0
             moved[fin] = 0.0
+            safe[rejected] = -np.inf  # back at the move's start: the certificates do not hold
     for ci in np.flatnonzero(done < moves):  # only if the iteration bound was hit
         out[ci, max(done[ci] - burn_in, 0) :] = start[ci]  # repeat the last state
     stats["duration"] = dur
