@@ -271,6 +271,28 @@ def test_hmc_windows_do_not_change_the_trajectory(sloper_case, monkeypatch):
         np.testing.assert_allclose(end, whole, atol=1e-8)
 
 
+def test_exit_certificates_skip_pairs_and_change_no_draw(sloper_case, monkeypatch):
+    """The exit search's pair certificates (``sampling.EXIT_CERTIFICATES``, ``hmc_exit``) are
+    kept from window to window and do certify pairs; with them off every window starts with
+    none. The posterior is the same, draw for draw."""
+    problem, history = sloper_case
+    certified = {True: [], False: []}
+    split = sampling.split_exits
+
+    def recorded(threads, *args):
+        _, safe, rows = args[-1]
+        certified[sampling.EXIT_CERTIFICATES].append(np.isfinite(safe[rows]).mean())
+        return split(threads, *args)
+
+    monkeypatch.setattr(sampling, "split_exits", recorded)
+    draws = {}
+    for on in (True, False):
+        monkeypatch.setattr(sampling, "EXIT_CERTIFICATES", on)
+        draws[on] = sample_posterior(problem.prior, history, 64, np.random.default_rng(8)).z
+    np.testing.assert_array_equal(draws[False], draws[True])
+    assert np.mean(certified[True]) > 0.3 and max(certified[False]) == 0.0
+
+
 def test_sampler_threads_change_no_draw(sloper_case, monkeypatch):
     """The exit search split over threads (``sample_posterior(threads=...)``, the inference
     node's ``sampler_threads``) returns the same posterior, draw for draw, as one thread; a

@@ -94,6 +94,9 @@ RESEED_ROUNDS = 2  # re-seed + rerun rounds for trapped chains (``convergence``)
 WINDOW_MIN_PRIMITIVES = 64  # HMC solves look-ahead windows only for larger systems
 WINDOW_MIN = 0.01  # rad: smallest adaptive HMC look-ahead window
 WINDOW_GROWTH = 4.0  # next window after a bounce at dt: this times dt (then clipped)
+# the exit search keeps its pair certificates from window to window (``hmc_exit``); False:
+# every window builds every pair, the same exits slower (``bench exits``' baseline)
+EXIT_CERTIFICATES = True
 HMC_TARGET_BOUNCES = 100  # burn-in shortens HMC moves to about this many bounces (limit 500)
 HMC_MIN_DURATION = 0.02  # rad: shortest adapted HMC move
 POSTERIOR_PRUNE_WIDEN = 2.0  # std factor of the warm rows' moment fit that prunes free pairs
@@ -240,7 +243,10 @@ def hmc_chains(
     - the momenta are drawn up front per (move, chain), so the draws do not depend on how the
       loop schedules windows and bounces;
     - ``threads`` > 1 deals each iteration's chains to that many threads for the exit search
-      (``hmc_exit.split_exits``): the same draws in any thread count, only faster.
+      (``hmc_exit.split_exits``): the same draws in any thread count, only faster;
+    - each chain keeps certificates of the pairs that cannot turn live until their edge has
+      moved far enough (``hmc_exit``, "Certificates"): skipped, the same exits, only faster;
+      a rejected move drops its chain's certificates.
     Returns the draws and counters (bounces, rejected moves, travel: rad followed by all
     chains, rejected moves included; ``duration``: each chain's T of its kept moves, (C,)).
     """
@@ -260,6 +266,7 @@ def hmc_chains(
     left = dur.copy()
     bounced = np.zeros(c, dtype=int)
     moved = np.zeros(c)  # rad travelled in the current move
+    # per chain: how far each edge has moved, each pair's certificate (``hmc_exit``)
     travel, safe = certificates(c, system.ellipse_terms(z[:1], p[:1])[0].shape[1], system.n_pairs)
     stats = {"bounces": 0, "rejected": 0, "travel": 0.0}
     move_max = float(np.max(duration))  # the longest move: the look-ahead bound
@@ -275,6 +282,8 @@ def hmc_chains(
         idx = np.flatnonzero(done < moves)
         if idx.size == 0:
             break
+        if not EXIT_CERTIFICATES:
+            safe[:] = -np.inf
         zc, pc, lc = z[idx], p[idx], left[idx]
         span = np.minimum(lc, win[idx])
         phi = 0.5 * float(span.max())  # quartics in time shifted as in ``ellipse_roots``

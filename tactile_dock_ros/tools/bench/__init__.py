@@ -31,6 +31,7 @@ SUITES = {
     # suite name -> one-line description
     "docking": "Fig. 13: ours vs GW vs IG per problem, on the problem and the depth-camera prior",
     "episode": "mock-profile episodes over DDS per problem: outcomes (give-up vs budget), latency",
+    "exits": "an episode's sampler calls with and without the exit search's pair certificates",
     "fuzz": "malformed messages on every subscription of every node: deaths, exceptions, history",
     "holds": "evaluate_hold on held-out depth priors: latency, ROC AUC of P_dock (feasible truths)",
     "perception": "640x480 depth -> slice -> prior: decode, slice, assembly, occlusion sampler",
