@@ -391,8 +391,8 @@ def window_exits(lin0, linp, tables, span, phi, to_quartic, structure, certs):
     t = 0; span where it does not leave), the primitive that root belongs to (-1 if it does
     not leave or is infeasible from the start) and whether the first segment is already
     infeasible (numerical grazing). Each chain's coefficients are built and filtered in one
-    pass over the primitives (``_chain_window``) and searched; nothing of size (C, K) is
-    stored. Quartics are solved in time shifted by phi, ``to_quartic`` =
+    pass over the pairs its certificates do not skip (``_chain_window``) and searched;
+    nothing of size (C, K) is stored. Quartics are solved in time shifted by phi, ``to_quartic`` =
     ``intervals.trig_to_quartic(phi)``; ``structure`` is the system's ``exit_structure``:
     per-pair primitives (P, slots; -1 inactive), observation and free flag, per-observation
     contact flag, and whether the system is plain (one primitive per pair and observation,
