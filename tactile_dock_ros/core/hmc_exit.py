@@ -86,8 +86,8 @@ INACTIVE = -1e300
 # longer split over 2 threads (dispatch, unequal root solving per chain), calls of 2^16 took
 # 0.74x (2026-11-28, one-off timing of every call of the episode both ways)
 SPLIT_MIN_WORK = 2**15
-# a sign certificate of |g| / max|dg/dt| rad (``window_exits``) gives up this much of |g|, far
-# above the rounding of a primitive's value and far below any clearance that matters
+# a primitive's clearance (``_clearance``, the certificates) gives up this much of |g|: far
+# above the rounding of a primitive's value, far below any margin that matters
 CERT_SLACK = 1e-12
 _POOLS: dict[int, ThreadPoolExecutor] = {}  # ``split_exits``' worker threads, by count
 _POOLS_LOCK = threading.Lock()
