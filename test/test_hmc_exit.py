@@ -24,8 +24,7 @@ CASES = {
 
 def _fresh(system, n_chains: int) -> tuple:
     """``window_exits``' ``certs`` for n chains without certificates yet."""
-    n_edges = system.ellipse_terms(np.zeros((1, system.n_dim)), np.zeros((1, system.n_dim)))[0]
-    travel, safe = hmc_exit.certificates(n_chains, n_edges.shape[1], system.n_pairs)
+    travel, safe = hmc_exit.certificates(n_chains, system.n_edges, system.n_pairs)
     return travel, safe, np.arange(n_chains)
 
 
@@ -100,7 +99,7 @@ def test_exit_search_split_over_threads_gives_the_same_exits(threads, monkeypatc
     pool's threads (a split that ran everything in the caller would pass the first part).
     Calls too small to be worth it (SPLIT_MIN_WORK) or with under 2 chains a part: one call."""
     args = _split_case()
-    n_chains, n_prims = len(args[0]), len(args[2][0])
+    n_chains, n_prims = len(args[0]), args[2][3]
     whole = hmc_exit.window_exits(*_chains(args, n_chains))
     assert 0 < whole[0].sum() < n_chains
     seen = []
@@ -199,7 +198,7 @@ def test_certificates_skip_pairs_and_keep_every_exit(case):
         args = (lin0, linp, system.window_tables, span, phi, intervals.trig_to_quartic(phi))
         reach = np.linalg.norm(lin0, axis=-1) * (1 - np.cos(span[:, None]))
         reach += np.linalg.norm(linp, axis=-1) * np.sin(span[:, None])
-        edge = system.window_tables[7]
+        edge = system.window_tables[2]
         travel, safe = kept[0], kept[1]
         covered.append(np.mean(safe > travel[:, edge] + reach[:, edge]))
         got = hmc_exit.window_exits(*args, system.exit_structure, kept)

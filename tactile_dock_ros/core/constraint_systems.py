@@ -80,7 +80,7 @@ class HistoryConstraints(_TrigSystem):
         # the quadratic term depends on the pair's edge only: computed once per paired edge
         # (tens of edges against hundreds of pairs), then gathered to the pairs
         edges, self._pair_edge = np.unique(pairs[:, 1], return_inverse=True)
-        self._n_edges = len(edges)
+        self.n_edges = len(edges)
         edge_basis = shape.basis[shape.edge_rows()[edges]]  # (E, 4, m)
         # (m, 4E) coordinate-major: each edge coordinate of ``_y`` is one contiguous plane
         self._edge_basis = np.ascontiguousarray(edge_basis.T.reshape(self.n_dim, -1))
@@ -93,7 +93,7 @@ class HistoryConstraints(_TrigSystem):
     def _y(self, z: np.ndarray) -> np.ndarray:
         """Displacements A z of the paired edges' end coordinates, (..., E, 4) (a view of
         (..., 4, E)); ``[..., self._pair_edge]`` of a per-edge value gives the pairs'."""
-        y = (z @ self._edge_basis).reshape(*z.shape[:-1], 4, self._n_edges)
+        y = (z @ self._edge_basis).reshape(*z.shape[:-1], 4, self.n_edges)
         return np.moveaxis(y, -2, -1)
 
     def _with_quadratic(self, lin: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -197,6 +197,7 @@ class LinearConstraints(_TrigSystem):
         self.n_obs = self.n_prims
         self.linear = np.ones(self.n_prims, dtype=bool)
         self.n_pairs = self.n_prims  # each inequality is its own pair and observation
+        self.n_edges = self.n_prims  # and its own "edge" (``ellipse_terms``: F_k . z)
         each = np.arange(self.n_prims)  # its own pair and observation, free: violated where > 0
         self.exit_structure = hmc_exit.structure(
             each[:, None], each, np.ones(self.n_prims), np.zeros(self.n_obs), True

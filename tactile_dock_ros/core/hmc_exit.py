@@ -42,7 +42,7 @@ that cannot be live changes no exit (see ``_chain_window``): on the calls of two
 depth-prior cycles (three_ledges, 723 calls; sloper, 694) the exits equal those of the search
 without certificates bit for bit (root ties keep primitive order), and so do the 960
 episodes of the held-out depth-prior run (docs/benchmarks.md). There 82-87 % of the pairs
-were skipped per window; the pairs are read from per-pair copies of the tables (``tables``),
+were skipped per window; the tables are laid out pair by pair (``tables``), as they are read,
 and the per-pair helpers are inlined (numba ``inline="always"``: as calls that pass the
 table tuples they cost twice as much). The exit search of three_ledges test truth 9's
 compliant cycle 11 (episode seed 4; 1,385 calls): 1.84 s -> 0.93 s with certificates alone
@@ -201,7 +201,7 @@ def coefficients(lin0, linp, tables, structure):
     """Trig coefficients (C, 5, K) of every primitive along each chain's ellipse, from the
     system's ``ellipse_terms`` (lin0, linp (C, E, J)), ``window_tables`` and
     ``exit_structure`` (the same code as the window search's)."""
-    n_chains, n_prims, n_pairs = lin0.shape[0], tables[0].shape[0], structure[0].shape[0]
+    n_chains, n_prims, n_pairs = lin0.shape[0], tables[3], structure[0].shape[0]
     out = np.empty((n_chains, 5, n_prims))
     quad, bern = np.empty((lin0.shape[1], 3)), np.empty((5, 5))
     found = (
@@ -213,6 +213,7 @@ def coefficients(lin0, linp, tables, structure):
     for c in range(n_chains):
         safe[:] = -np.inf  # every pair built
         _chain_terms(lin0[c], linp[c], structure[4], quad)
+        _edge_speeds(lin0[c], linp[c], speed)
         cert = (travel, speed, safe)
         chain = (lin0[c], linp[c], quad)
         _chain_window(chain, tables, 0.0, bern, structure, out[c], found, cert, True)
@@ -285,22 +286,18 @@ def _may_vanish(k0, k1, k2, k3, k4, span, bern):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _pair_window(p, e, chain, tables, span, bern, structure, out):
-    """Pair p (on edge e) in one chain's window: its primitives' trig coefficients into
-    c (slots, 5) and whether each may vanish into ``may`` (``_may_vanish``); returns whether
-    the pair is live and its clearance (``_clearance``): how far its edge may move before
-    the pair could turn live (0: it may at once). ``chain`` = (lin0, linp, quad) as in
-    ``_chain_window``, ``out`` = (c, may)."""
+def _pair_window(p, e, y0, chain, tables, span, bern, structure, out):
+    """Pair p (on edge e, whose ends are displaced by y0, a norm) in one chain's window: its
+    primitives' trig coefficients into c (slots, 5) and whether each may vanish into ``may``
+    (``_may_vanish``); returns whether the pair is live and its clearance (``_clearance``):
+    how far its edge may move before the pair could turn live (0: it may at once).
+    ``chain`` = (lin0, linp, quad) as in ``_chain_window``, ``out`` = (c, may)."""
     lin0, linp, quad = chain
     c, may = out
-    pair_w, pair_g = tables[5], tables[6]
+    pair_w, pair_g = tables[0], tables[1]
     pair_prims, _, pair_free, _, plain = structure
     enter, leave = True, pair_free[p]
     above, below = 0.0, 0.0  # the largest clearance of a primitive > 0, < 0
-    y0 = 0.0
-    for i in range(lin0.shape[1]):
-        y0 += lin0[e, i] * lin0[e, i]
-    y0 = np.sqrt(y0)
     for j in range(pair_prims.shape[1]):
         if pair_prims[p, j] < 0:
             continue
@@ -349,7 +346,7 @@ def _chain_window(chain, tables, span, bern, structure, coef, found, cert, every
     certificates (``window_exits``). A pair whose certificate exceeds its edge's travel by
     the window's end (travel + ``_reach`` at span) stays dead: it is not built; every other pair is
     built and certified anew."""
-    pair_edge = tables[7]
+    pair_edge = tables[2]
     pair_prims, pair_obs, _, _, _ = structure
     solve, live, covered = found
     travel, speed, safe = cert
@@ -364,7 +361,9 @@ def _chain_window(chain, tables, span, bern, structure, coef, found, cert, every
         e = pair_edge[p]  # a pair's primitives share its edge (``tables``)
         if safe[p] > travel[e] + _reach(speed, e, one_minus_cos, sin):
             continue
-        is_live, clear = _pair_window(p, e, chain, tables, span, bern, structure, (c, may))
+        is_live, clear = _pair_window(
+            p, e, speed[e, 0], chain, tables, span, bern, structure, (c, may)
+        )
         safe[p] = travel[e] + clear if clear > 0 else -np.inf
         if is_live:
             live[n_live] = p
@@ -402,7 +401,7 @@ def window_exits(lin0, linp, tables, span, phi, to_quartic, structure, certs):
     chain's dt, each pair the window builds gets a new certificate (see the module)."""
     pair_obs, contact_obs, plain = structure[1], structure[3], structure[4]
     travel, safe, rows = certs
-    n_chains, n_prims, n_pairs = lin0.shape[0], tables[0].shape[0], pair_obs.shape[0]
+    n_chains, n_prims, n_pairs = lin0.shape[0], tables[3], pair_obs.shape[0]
     hit = np.zeros(n_chains, dtype=np.bool_)
     stuck = np.zeros(n_chains, dtype=np.bool_)
     dt = span.copy()
@@ -465,7 +464,7 @@ def split_exits(threads, lin0, linp, tables, span, phi, to_quartic, structure, c
     depth-prior three_ledges cycle (16 chains) on 2 cores, contiguous halves took 0.73x of
     one thread, round-robin 0.68x (2026-11-28, medians of 5 timings)."""
     n_chains = lin0.shape[0]
-    if threads < 2 or n_chains < 2 * threads or n_chains * tables[0].shape[0] < SPLIT_MIN_WORK:
+    if threads < 2 or n_chains < 2 * threads or n_chains * tables[3] < SPLIT_MIN_WORK:
         return window_exits(lin0, linp, tables, span, phi, to_quartic, structure, certs)
     parts = [np.arange(i, n_chains, threads) for i in range(threads)]
     travel, safe, rows = certs
@@ -524,11 +523,12 @@ def tables(weights, lin_edge, g_mean, psign, quad_edge, pair_prims) -> tuple:
     of chain c are k1 = weights[k] . lin0[c, lin_edge[k]] (k2 the same with linp),
     k0 = g_mean[k] + psign[k] q0, k3 and k4 psign[k] times q3, q4, where (q0, q3, q4) are the
     trig coefficients of quad(lin0[c, e] cos t + linp[c, e] sin t) of edge e = quad_edge[k]
-    (``_edge_quadratics``; see ``constraint_systems``). The same per pair and slot of
-    ``pair_prims`` (the ``structure``'s), read by the window search pair by pair: weights
-    (P, slots, J), (g_mean, psign, |weights|) (P, slots, 3) and the pair's edge (P,).
-    Fixed dtypes as ``structure``. Raises ValueError unless each pair's primitives share
-    one edge, also for their quadratic term (the certificates bound the pair by its edge)."""
+    (``_edge_quadratics``; see ``constraint_systems``). Returned per pair and slot of
+    ``pair_prims`` (the ``structure``'s), as the window search reads them, pair by pair:
+    weights (P, slots, J), (g_mean, psign, |weights|) (P, slots, 3), the pair's edge (P,),
+    and the number of primitives K. Fixed dtypes as ``structure``. Raises ValueError unless
+    each pair's primitives share one edge, also for their quadratic term (the certificates
+    bound the pair by its edge)."""
     weights = np.ascontiguousarray(weights, dtype=float)
     lin_edge = np.ascontiguousarray(lin_edge, dtype=np.int64)
     g_mean = np.ascontiguousarray(g_mean, dtype=float)
@@ -545,14 +545,10 @@ def tables(weights, lin_edge, g_mean, psign, quad_edge, pair_prims) -> tuple:
         raise ValueError("the window search needs each pair's primitives on one edge")
     per_prim = np.stack([g_mean, psign, np.sqrt(np.sum(weights * weights, axis=1))], axis=1)
     return (
-        weights,
-        lin_edge,
-        g_mean,
-        psign,
-        quad_edge,
         np.ascontiguousarray(np.where(active[..., None], weights[at], 0.0)),
         np.ascontiguousarray(np.where(active[..., None], per_prim[at], 0.0)),
         pair_edge,
+        len(weights),
     )
 
 

@@ -267,7 +267,7 @@ def hmc_chains(
     bounced = np.zeros(c, dtype=int)
     moved = np.zeros(c)  # rad travelled in the current move
     # per chain: how far each edge has moved, each pair's certificate (``hmc_exit``)
-    travel, safe = certificates(c, system.ellipse_terms(z[:1], p[:1])[0].shape[1], system.n_pairs)
+    travel, safe = certificates(c, system.n_edges, system.n_pairs)
     stats = {"bounces": 0, "rejected": 0, "travel": 0.0}
     move_max = float(np.max(duration))  # the longest move: the look-ahead bound
     if window is None:
