@@ -10,6 +10,7 @@ from tactile_dock_ros.core import problems
 from tactile_dock_ros.core.constraints import (
     PairStructure,
     collision_bounds,
+    crossed_free_pairs,
     history_consistent,
     observation_primitives,
     observation_violations,
@@ -131,6 +132,42 @@ def test_history_consistent_matches_brute_force_on_random_polygons():
         assert got == brute_force_consistent(poly, True, history, 0.4), trial
         checked += got
     assert checked > 5  # the positive branch is exercised too
+
+
+def test_crossed_free_pairs_are_the_free_segments_crossing_an_edge():
+    """Every (free observation, edge) pair some polygon of the batch crosses, and no other pair
+    (contact rows are never listed), against shapely on random polygons and segments."""
+    rng = np.random.default_rng(5)
+    listed = 0
+    for trial in range(60):
+        n, k = int(rng.integers(3, 8)), int(rng.integers(1, 6))
+        angles = np.sort(rng.uniform(0, 2 * np.pi, (2, n)), axis=1)
+        radius = rng.uniform(0.3, 1.0, (2, n))
+        polys = np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=-1)
+        a = rng.uniform(-1.2, 1.2, (k, 2))
+        b = a + rng.normal(0, 0.6, (k, 2))
+        history = History(a, b, rng.choice([Status.FREE, Status.STICK], k))
+        got = crossed_free_pairs(True, polys, history)
+        expected = []
+        for o in range(k):
+            for e in range(n):
+                ends = [poly[[e, (e + 1) % n]] for poly in polys]
+                if not all(generic(a[o], b[o], *end) for end in ends):
+                    continue
+                seg = shapely.LineString([a[o], b[o]])
+                hit = any(seg.intersects(shapely.LineString(end)) for end in ends)
+                if hit and history.status[o] == Status.FREE:
+                    expected.append((o, e))
+        generic_rows = {tuple(p) for p in got.tolist()}
+        assert set(expected) <= generic_rows, trial
+        for o, e in generic_rows - set(expected):  # only degenerate (near-collinear) extras
+            ends = [poly[[e, (e + 1) % n]] for poly in polys]
+            assert not all(generic(a[o], b[o], *end) for end in ends), trial
+        assert np.all(np.diff(got[:, 0] * n + got[:, 1]) > 0)  # row order, no repeats
+        listed += len(got)
+    assert listed > 20
+    empty = crossed_free_pairs(True, np.zeros((0, 3, 2)), History([[0, 0]], [[1, 0]], [0]))
+    assert empty.shape == (0, 2)
 
 
 def test_history_consistent_batches_and_open_polylines():

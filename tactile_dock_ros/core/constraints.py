@@ -186,19 +186,11 @@ def observation_violations(
     for callers that evaluate one history many times (computed here when None).
     """
     v = _check_vertices(vertices)
-    edges = _edges(v.shape[1], shape_closed)
     k = len(history)
     if k == 0 or len(v) == 0:
         return np.zeros((len(v), k))
-    seg_lo = np.minimum(history.a, history.b)
-    seg_hi = np.maximum(history.a, history.b)
-    ends = v[:, edges]  # (N, E, 2, 2)
-    edge_lo = ends.min(axis=(0, 2))
-    edge_hi = ends.max(axis=(0, 2))
-    overlap = np.all(
-        (seg_lo[:, None] <= edge_hi[None]) & (edge_lo[None] <= seg_hi[:, None]), axis=-1
-    )
-    pairs = np.argwhere(overlap)
+    ends = v[:, _edges(v.shape[1], shape_closed)]  # (N, E, 2, 2)
+    pairs = _box_pairs(history, np.arange(k), ends)
     if primitives is None:
         primitives = observation_primitives(history, friction)
     sign, lin, const, active = primitives
@@ -207,6 +199,39 @@ def observation_violations(
     y = ends[:, structure.pairs[:, 1]].reshape(len(v), len(obs), 4)
     g = pair_values(y, sign[obs], lin[obs], const[obs], active[obs])
     return structure.reduce(g)
+
+
+def _box_pairs(history: History, rows: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """(P, 2) (observation, edge) pairs, in row order, of the observations ``rows`` whose
+    segment's bounding box meets the box of the edge over the batch ``ends`` (N, E, 2, 2): the
+    bounding-volume check of Sec. IV-F (no other pair can touch)."""
+    a, b = history.a[rows], history.b[rows]
+    seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
+    edge_lo, edge_hi = ends.min(axis=(0, 2)), ends.max(axis=(0, 2))
+    overlap = np.all(
+        (seg_lo[:, None] <= edge_hi[None]) & (edge_lo[None] <= seg_hi[:, None]), axis=-1
+    )
+    pairs = np.argwhere(overlap)
+    pairs[:, 0] = rows[pairs[:, 0]]
+    return pairs
+
+
+def crossed_free_pairs(shape_closed: bool, vertices: np.ndarray, history: History) -> np.ndarray:
+    """(Q, 2) (observation, edge) pairs, in row order, of the free observations that some vertex
+    set (N, n, 2) crosses (free pair value > 0, ``PairStructure.pair_values``): over every
+    edge, not a pruned list (the pairs a pruned constraint system missed)."""
+    v = _check_vertices(vertices)
+    free = np.flatnonzero(history.status == Status.FREE)
+    if free.size == 0 or len(v) == 0:
+        return np.zeros((0, 2), dtype=int)
+    ends = v[:, _edges(v.shape[1], shape_closed)]
+    pairs = _box_pairs(history, free, ends)
+    sign, lin, const, _ = observation_primitives(history, 0.0)  # free rows: no friction cone
+    obs = pairs[:, 0]
+    y = ends[:, pairs[:, 1]].reshape(len(v), len(pairs), 4)
+    g4 = pair_values(y, sign[obs, :4], lin[obs, :4], const[obs, :4], True)
+    crossed = np.maximum(-g4.max(axis=-1), g4.min(axis=-1)) > 0
+    return pairs[np.any(crossed, axis=0)]
 
 
 def history_consistent(
