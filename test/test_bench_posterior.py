@@ -10,18 +10,26 @@ from tactile_dock_ros.tools import bench
 
 
 def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_path):
-    """Sloper truth 1 on the problem prior (measured 2026-11-28: a dock planned in its second
-    cycle, a give-up in its third): both compared with an SMC reference of their history."""
+    """Sloper truth 1 on the problem prior (measured 2026-11-29: P_dock 0.349, 0.094, then a
+    give-up in its third cycle): the cycles with a history compared with an SMC reference."""
     out = tmp_path / "posterior.json"
     argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
-    argv += ["--max-cycles", "3", "--cycles", "1", "2", "--particles", "200", "--sampler-runs", "3"]
+    argv += ["--max-cycles", "3", "--particles", "200", "--sampler-runs", "3"]
     argv += ["--json", str(out)]
-    assert bench.main(argv) == 0
+    # which cycle gives up is the episode's coin (it may differ between CPUs): an episode that
+    # already gave up in cycle 1 has no cycle 2, and each compared cycle is checked by the kind
+    # of plan it made
+    asked = [1, 2]
+    try:
+        code = bench.main([*argv, "--cycles", *map(str, asked)])
+    except SystemExit as ended:
+        assert "[2] not in this episode" in str(ended)
+        asked = [1]
+        code = bench.main([*argv, "--cycles", "1"])
+    assert code == 0
     report = json.loads(out.read_text())
-    # which cycle gives up is the episode's coin (it differs between CPUs): each compared
-    # cycle is checked by the kind of plan it made
     assert report["particles"] == 200 and report["reference"] == "smc"
-    assert [row["cycle"] for row in report["cycles"]] == [1, 2]
+    assert [row["cycle"] for row in report["cycles"]] == asked
     for row in report["cycles"]:
         assert row["history_rows"] > 0 and min(row["reference_stages"]) >= 2
         if row["plan"] == "dock":

@@ -255,19 +255,25 @@ def test_closure_edges_are_never_docking_sites():
             assert q_edge[3] > 0.9 and plan.target_edge == 3
 
 
-@pytest.mark.parametrize("edge", [5, 30, 60])
-def test_start_inside_lor_climbs_out_or_gives_up_with_reason(edge):
+def test_start_inside_lor_climbs_out_or_gives_up_with_reason():
+    """A tool 3 mm off the mean surface (inside the likely-obstacle region) near three edges:
+    each plan either gives up with a reason or climbs out from the tool without crossing the
+    mean outline, and some climb out."""
     problem, samples, _ = _prior_plan("three_ledges")
     mean = samples.mean(axis=0)
-    c, d = mean[problem.prior.edges[edge]]
-    normal = np.array([d[1] - c[1], c[0] - d[0]]) / np.linalg.norm(d - c)  # outward
-    start = 0.5 * (c + d) + 0.003 * normal  # 3 mm off the mean surface: inside the LOR
-    _, _, plan = _prior_plan("three_ledges", start=start)
-    assert plan.reason
-    if plan.decision == "dock":
-        assert np.allclose(plan.path[0], start)
-        outline = shapely.LineString(mean)
-        assert not shapely.intersects(outline, shapely.LineString(plan.path[:-1]))
+    docked = 0
+    for edge in (5, 30, 60):
+        c, d = mean[problem.prior.edges[edge]]
+        normal = np.array([d[1] - c[1], c[0] - d[0]]) / np.linalg.norm(d - c)  # outward
+        start = 0.5 * (c + d) + 0.003 * normal
+        _, _, plan = _prior_plan("three_ledges", start=start)
+        assert plan.reason
+        if plan.decision == "dock":
+            docked += 1
+            assert np.allclose(plan.path[0], start)
+            outline = shapely.LineString(mean)
+            assert not shapely.intersects(outline, shapely.LineString(plan.path[:-1]))
+    assert docked > 0
 
 
 def test_low_threshold_gap_gives_up():

@@ -202,9 +202,11 @@ def test_benchmark_histories_are_consistent_with_their_truths():
 def test_warm_start_from_the_previous_posterior(sloper_case):
     problem, history = sloper_case
     shape = problem.prior
-    before = sample_posterior(shape, history.subset([0, 1]), 120, np.random.default_rng(4))
+    # ~20 % of the one-probe posterior survives the second probe (19-33 of 120 draws over 12
+    # seeds, 2026-11-29): 240 draws leave the 16 chains' rows a wide margin on any machine
+    before = sample_posterior(shape, history.subset([0, 1]), 240, np.random.default_rng(4))
     consistent = history_consistent(False, before.vertices, history, problem.friction)
-    assert consistent.sum() >= 16  # enough of the old posterior survives the new probe
+    assert consistent.sum() >= 16
     warm = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
     assert warm.info["warm_seeds"] == 16 and warm.info["burn_in"] == 1
     assert history_consistent(False, warm.vertices, history, problem.friction).all()
@@ -363,7 +365,10 @@ def test_default_hmc_chains_cover_the_samples_without_surplus(n):
 # --- seeding that cannot trap chains, and the between-chain diagnostic ---
 
 KNOWN_BAD_SEEDS = [13, 111]  # before the fix: half the chains in a pocket of ~4e-5 prior mass
-MEAN_TOL = 0.3  # posterior std: every run's marginal means must be this close to rejection's
+# posterior std: every run's marginal means must be this close to rejection's. Over 43 seeds
+# (2026-11-29) the largest was 0.087 (HMC), 0.161 (Gibbs, 4000 sweeps): a margin for machines
+# whose draws differ
+MEAN_TOL = 0.3
 
 
 @pytest.fixture(scope="module")
@@ -412,20 +417,20 @@ def _check_seeds(reference, method, seeds, descent_only, monkeypatch, n=2000):
 
 
 @pytest.mark.parametrize(
-    ("method", "seeds", "descent_only"),
+    ("method", "seeds", "descent_only", "n"),
     [
-        ("hmc", [*KNOWN_BAD_SEEDS, 0, 1], False),
-        ("hmc", [*KNOWN_BAD_SEEDS, 90], True),  # 90: descent put 13 chains in the pocket
-        ("gibbs", KNOWN_BAD_SEEDS, False),
+        ("hmc", [*KNOWN_BAD_SEEDS, 0, 1], False, 2000),
+        ("hmc", [*KNOWN_BAD_SEEDS, 90], True, 2000),  # 90: descent put 13 chains in the pocket
+        ("gibbs", KNOWN_BAD_SEEDS, False, 4000),
     ],
 )
 def test_problem2_means_match_rejection_on_the_known_bad_seeds(
-    problem2_reference, method, seeds, descent_only, monkeypatch
+    problem2_reference, method, seeds, descent_only, n, monkeypatch
 ):
     """The seeds that trapped half the default HMC chains (125 chains, 2000 samples) in a
     pocket (standardized mean error 4.6 before the fix) and a few more; the 40-seed version
-    is marked slow."""
-    _check_seeds(problem2_reference, method, seeds, descent_only, monkeypatch)
+    is marked slow. Gibbs gets 4000 sweeps, as there."""
+    _check_seeds(problem2_reference, method, seeds, descent_only, monkeypatch, n)
 
 
 @pytest.mark.slow
@@ -437,8 +442,9 @@ def test_problem2_means_match_rejection_on_the_known_bad_seeds(
 def test_problem2_means_match_rejection_over_40_seeds(
     problem2_reference, method, descent_only, n, monkeypatch
 ):
-    """Gibbs gets 4000 sweeps: at 2000 its Monte Carlo error alone reaches 0.325 std on one of
-    the 40 seeds (no chain trapped; slowly mixing chains)."""
+    """Gibbs gets 4000 sweeps: at 2000 its Monte Carlo error alone reached 0.205 std over 43
+    seeds (2026-11-29; 0.325 on one of 40 with earlier code), too near MEAN_TOL for a machine
+    whose draws differ (no chain trapped; slowly mixing chains)."""
     _check_seeds(problem2_reference, method, range(40), descent_only, monkeypatch, n)
 
 
@@ -739,19 +745,27 @@ def test_split_rhat_and_trapped_chains_on_synthetic_draws():
 
 def test_atypical_descent_seeds_are_screened():
     """A seed far less likely under the prior than the typical one is dropped; on
-    three_ledges descents do land in such places (|z|^2 ~250 against ~100)."""
+    three_ledges descents do land in such places (|z|^2 ~250 against ~100): whether one
+    search meets one is the descents' coin (7 of 12 seeds, 2026-11-29), so 10 searches are
+    run, each keeps only typical seeds, and some screen."""
     z = np.random.default_rng(0).normal(size=(9, 5))
     far = np.vstack([z, 4 * np.ones(5)])  # |z|^2 = 80 against a median near 5
     np.testing.assert_array_equal(sampling._typical(far, far), [True] * 9 + [False])
     problem, history, _ = three_ledges_after_probes(10, seed=0)
-    seeds = sampling._seed(problem.prior, history, np.random.default_rng(4), 16, 1e-4, 8, 60)
-    assert seeds.screened > 0 and seeds.distinct >= sampling.SEED_MIN_DISTINCT
-    assert np.all(sampling._typical(seeds.z, seeds.z))
+    screened = 0
+    for seed in range(10):
+        seeds = sampling._seed(problem.prior, history, np.random.default_rng(seed), 16, 1e-4, 8, 60)
+        assert seeds.distinct >= sampling.SEED_MIN_DISTINCT
+        assert np.all(sampling._typical(seeds.z, seeds.z))
+        screened += seeds.screened
+    assert screened > 0
 
 
 def test_an_inconsistent_history_is_pruned_until_it_fits():
     """The history that ended a depth-prior episode (sloper truth 2, bench docking seeds) with
-    "no history-consistent seed found": it needs more than three rounds of dropping."""
+    "no history-consistent seed found": it needs more than three rounds of dropping. Not one
+    seed's coin: from 8 other sampler seeds the episode loop's search deferred 6 rows and the
+    one-call search dropped 6-7, every time (2026-11-29)."""
     problem, index = problems.get("sloper"), problems.names().index("sloper")
     truth = problem.sample_ground_truth(np.random.default_rng([0, index, 2]))
     config = PerceptionConfig.load(bringup.PACKAGE_ROOT / "config/perception_mock.yaml")
