@@ -76,7 +76,7 @@ SAMPLERS = {
         # posterior's correlations in the sweeps a cycle can afford
         Sampler("gibbs", mcmc=True, on_node=False, burn_in=(5, 1)),
         # a benchmark baseline only: its chains barely move (split R-hat ~4 on Fig. 9 problem
-        # 2; std 0.35-0.63 of the posterior's on problem 3 in the issue-12 audit)
+        # 2; std 0.35-0.63 of the posterior's on problem 3, docs/inference.md)
         Sampler("mh", mcmc=True, on_node=False, burn_in=(200, 50)),
         Sampler("rejection", mcmc=False, on_node=True),
     )

@@ -1,8 +1,8 @@
 """640x480 depth image -> slice -> prior: decode, slice, prior assembly and occlusion sampler.
 
 Each terrain of ``perception.scenes`` is rendered once (16UC1 bytes, noise on, no calibration
-error); then each stage is timed ``--repeats`` times and the median reported next to the issue's
-targets (slice <= 20 ms, whole prior <= 200 ms on one core) as a ratio. The prior's 2-sigma
+error); then each stage is timed ``--repeats`` times and the median reported next to its target
+(slice <= 20 ms, whole prior <= 200 ms on one core) as a ratio. The prior's 2-sigma
 coverage of the true terrain is reported as a quality check.
 """
 
