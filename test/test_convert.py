@@ -232,6 +232,31 @@ def test_plane_points_round_trip(xy):
     np.testing.assert_allclose(plane.vector_to_plane(plane.vector_from_plane(p2)), p2, atol=1e-12)
 
 
+def test_hold_evaluations_become_messages_and_tool_points_are_checked():
+    from geometry_msgs.msg import Point
+    from tactile_dock_ros.msg import HoldEvaluation as Msg
+
+    from tactile_dock_ros.core.holds import HoldEvaluation
+
+    found = HoldEvaluation("dock", np.array([0.1, -0.2]), 0.8, 0.7, 4, "ours: edge 4", 0.02)
+    msg = convert.hold_evaluation_to_msg(3, found, HEADER)
+    assert (msg.hold_id, msg.found, msg.decision, msg.target_edge) == (3, True, Msg.DOCK, 4)
+    assert (msg.site.x, msg.site.y, msg.site.z) == (0.1, -0.2, 0.0)
+    assert (msg.site_docking_probability, msg.path_docking_probability) == (0.8, 0.7)
+    assert msg.reason == "ours: edge 4" and msg.compute_time == 0.02 and msg.header == HEADER
+    failed = convert.hold_not_evaluated_msg(3, "not evaluated: bad prior", HEADER)
+    assert failed.found and failed.decision == Msg.GIVE_UP and failed.target_edge == -1
+    assert np.isnan(failed.site.x) and failed.reason == "not evaluated: bad prior"
+    missing = convert.hold_not_evaluated_msg(9, "no hold 9 (kept: [1, 2])")
+    assert not missing.found and missing.reason == "no hold 9 (kept: [1, 2])"
+    np.testing.assert_array_equal(
+        convert.point_xy("tool", Point(x=0.3, y=-0.1, z=5.0)), [0.3, -0.1]
+    )
+    for bad in (Point(x=np.nan), Point(y=2 * validate.MAX_COORDINATE_M)):
+        with pytest.raises(MessageError, match="tool"):
+            convert.point_xy("tool", bad)
+
+
 def test_plane_axes_must_be_orthonormal():
     with pytest.raises(ValueError, match="orthonormal"):
         PlaneFrame(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 1.0, 0]))

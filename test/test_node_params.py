@@ -51,7 +51,13 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("perception", "capture:=sometimes", "capture"),
         ("inference", "method:=mh", "method: 'mh' is not one of"),  # a benchmark baseline only
         ("inference", "method:=gibbs", "method: 'gibbs' is not one of"),  # biased on depth priors
-        ("planner", "load_direction:=[0.0, -2.0]", "load_direction must be a unit vector"),
+        ("planner", "load_direction:=[0.0, -0.5]", "load_direction must be a unit vector"),
+        # list parameters: each value within its range
+        ("planner", "load_direction:=[0.0, -2.0]", r"load_direction: \[0.0, -2.0\] is below -1"),
+        ("executor", "workspace_max:=[500.0, 1.0]", "workspace_max: .* is above 100"),
+        ("mock_hardware", "calibration_error:=[0.0, 0.0, 0.0, 0.0, 0.0, 2.0]", "above 0.5"),
+        ("mock_hardware", "force_bias:=[1000.0, 0.0, 0.0]", "force_bias: .* is above 100"),
+        ("perception", "plane_origin:=[0.0, 1000.0, 0.0]", "plane_origin: .* is above 100"),
     ],
 )
 def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path):
@@ -133,3 +139,21 @@ def test_executor_defaults_are_the_guarded_settings_defaults():
     shared = [f.name for f in fields(Settings) if f.name in node_defaults]
     assert "slip_tolerance" in shared and len(shared) >= 9
     assert {n: node_defaults[n] for n in shared} == {n: getattr(Settings(), n) for n in shared}
+
+
+def test_every_numeric_parameter_has_a_range_and_ros_describes_it():
+    """Every number, or list of numbers, of every node's table has both bounds; ``ros2 param
+    describe`` shows a scalar's as its range and a list's in the description."""
+    modules = ("executor", "inference", "mock_hardware", "perception", "planner")
+    for module in (f"{name}_node" for name in modules):
+        for param in importlib.import_module(f"tactile_dock_ros.nodes.{module}").PARAMS:
+            values = param.default if isinstance(param.default, list) else [param.default]
+            numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+            if not numeric or not values:
+                continue
+            assert param.low is not None and param.high is not None, (module, param.name)
+            text = param.descriptor().description
+            if isinstance(param.default, list):
+                assert f"(each in [{param.low:g}, {param.high:g}])" in text, (module, param.name)
+                with pytest.raises(ValueError, match=param.name):
+                    param.check([param.high + 1.0] * len(values))

@@ -35,10 +35,40 @@ PLANE_FRAME_ID = Param("plane_frame_id", "dock_plane", "frame id stamped on plan
 PLANE_TABLE = [
     PLANE_FRAME_ID,
     Param("base_frame_id", "base_link", "arm base frame of poses, wrenches and commands"),
-    Param("plane_origin", [0.0, 0.0, 0.0], "plane origin in the base frame", "m", length=3),
-    Param("plane_x_axis", [1.0, 0.0, 0.0], "plane x axis in the base frame", "unit", length=3),
-    Param("plane_y_axis", [0.0, 0.0, 1.0], "plane y axis (up) in the base frame", "unit", length=3),
+    Param(
+        "plane_origin", [0.0, 0.0, 0.0], "plane origin in the base frame", "m", -100, 100, length=3
+    ),
+    Param(
+        "plane_x_axis", [1.0, 0.0, 0.0], "plane x axis in the base frame", "unit", -1, 1, length=3
+    ),
+    Param(
+        "plane_y_axis",
+        [0.0, 0.0, 1.0],
+        "plane y axis (up) in the base frame",
+        "unit",
+        -1,
+        1,
+        length=3,
+    ),
 ]
+
+
+def workspace_box(low: list[float], high: list[float], whose: str) -> list[Param]:
+    """``workspace_min`` / ``workspace_max``: a box of the docking plane (x, y), metres, each
+    corner coordinate within +-100 m."""
+    return [
+        Param(
+            f"workspace_{end}",
+            corner,
+            f"{whose}, {side} corner (plane x, y)",
+            "m",
+            -100,
+            100,
+            length=2,
+        )
+        for end, corner, side in (("min", low, "lower"), ("max", high, "upper"))
+    ]
+
 
 # Captured holds kept by perception, and their priors by the planner and inference (one bound).
 MAX_HOLDS = Param("max_holds", 8, "captured holds kept (the oldest is dropped)", "", 1, 1000)

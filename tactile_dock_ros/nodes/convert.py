@@ -47,6 +47,7 @@ from tactile_dock_ros.msg import (
     EpisodeCycle,
     EpisodeStatus,
     ExecutionReport,
+    HoldEvaluation,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -68,8 +69,15 @@ def _points(name: str, points, limit: int) -> np.ndarray:
     return xy
 
 
-def _point(xy) -> Point:
+def plane_point(xy) -> Point:
+    """A point (x, y) of the docking plane as geometry_msgs/Point (z = 0)."""
     return Point(x=float(xy[0]), y=float(xy[1]), z=0.0)
+
+
+def point_xy(name: str, msg: Point) -> np.ndarray:
+    """geometry_msgs/Point of the docking plane -> (2,) metres, each within
+    ``validate.MAX_COORDINATE_M`` (z ignored)."""
+    return validate.within(name, [msg.x, msg.y], validate.MAX_COORDINATE_M, "m")
 
 
 # --------------------------------------------------------------------------- arm and sensors
@@ -183,7 +191,9 @@ def segments_to_msgs(history: History, header: Header, plan_ids=0) -> list[Conta
     """History -> ContactSegment[]; ``plan_ids`` is one id for all or one per segment."""
     ids = np.broadcast_to(np.asarray(plan_ids, dtype=int), (len(history),))
     return [
-        ContactSegment(header=header, start=_point(a), end=_point(b), status=int(s), plan_id=int(i))
+        ContactSegment(
+            header=header, start=plane_point(a), end=plane_point(b), status=int(s), plan_id=int(i)
+        )
         for a, b, s, i in zip(history.a, history.b, history.status, ids, strict=True)
     ]
 
@@ -276,7 +286,7 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
         nonce=int(command.nonce),
         history_length=int(command.history_length),
         decision=DockingPlan.DOCK if command.dock else DockingPlan.GIVE_UP,
-        waypoints=[_point(w) for w in command.waypoints],
+        waypoints=[plane_point(w) for w in command.waypoints],
         load_direction=vector3(command.load),
         contact_force_threshold=float(command.force_threshold),
         max_speed=float(command.max_speed),
@@ -284,7 +294,7 @@ def plan_to_msg(command: PlanCommand, header: Header) -> DockingPlan:
         docking_probability=float(command.p_dock),
         objective=float(command.objective),
         target_edge=int(command.target_edge),
-        target_point=_point(command.target_point),
+        target_point=plane_point(command.target_point),
         reason=command.reason,
     )
 
@@ -356,7 +366,7 @@ def report_to_msg(report: Report, header: Header) -> ExecutionReport:
         nonce=int(report.nonce),
         outcome=int(report.outcome),
         segments=segments_to_msgs(report.history, header, report.plan_id),
-        stop_point=_point(report.stop_point),
+        stop_point=plane_point(report.stop_point),
         detail=report.detail,
     )
 
@@ -451,7 +461,7 @@ def dock_feedback(state: str, cycles) -> Dock.Feedback:
         cycle=len(cycles),
         state=getattr(EpisodeStatus, state),
         docking_probability=float(cycle["p_dock"]),
-        target=_point((0.0, 0.0) if cycle.get("target") is None else cycle["target"]),
+        target=plane_point((0.0, 0.0) if cycle.get("target") is None else cycle["target"]),
         outcome=_CYCLE_OUTCOMES[cycle.get("outcome", "")],
         segments=int(cycle.get("segments", 0)),
     )
@@ -467,7 +477,7 @@ def dock_result(
         episode=int(episode),
         hold_id=int(hold_id),
         cycles=int(cycles),
-        docked_point=_point((0.0, 0.0) if docked is None else docked),
+        docked_point=plane_point((0.0, 0.0) if docked is None else docked),
         load=Vector3() if load is None else Vector3(x=float(load[0]), y=float(load[1]), z=0.0),
         reason=reason,
     )
@@ -494,6 +504,42 @@ def episode_cycles_from_msg(msg: EpisodeStatus) -> list[dict]:
             }
         )
     return records
+
+
+# --------------------------------------------------------------------------- holds
+
+
+def hold_evaluation_to_msg(hold_id: int, evaluation, header: Header) -> HoldEvaluation:
+    """``core.holds.evaluate_hold``'s answer for a kept hold -> HoldEvaluation (found)."""
+    dock = evaluation.decision == "dock"
+    return HoldEvaluation(
+        hold_id=int(hold_id),
+        found=True,
+        header=header,
+        decision=HoldEvaluation.DOCK if dock else HoldEvaluation.GIVE_UP,
+        site=plane_point(evaluation.site),
+        target_edge=int(evaluation.target_edge),
+        site_docking_probability=float(evaluation.site_p_dock),
+        path_docking_probability=float(evaluation.path_p_dock),
+        reason=evaluation.reason,
+        compute_time=float(evaluation.seconds),
+    )
+
+
+def hold_not_evaluated_msg(hold_id: int, reason: str, header: Header | None = None):
+    """A HoldEvaluation without a plan: a hold not kept (no ``header``: not found), or a kept
+    one the planner could not take (GIVE_UP, no site)."""
+    if header is None:
+        return HoldEvaluation(hold_id=int(hold_id), found=False, reason=reason)
+    return HoldEvaluation(
+        hold_id=int(hold_id),
+        found=True,
+        header=header,
+        decision=HoldEvaluation.GIVE_UP,
+        site=Point(x=np.nan, y=np.nan),
+        target_edge=-1,
+        reason=reason,
+    )
 
 
 # --------------------------------------------------------------------------- depth camera

@@ -58,6 +58,7 @@ from tactile_dock_ros.nodes.common import (
     plane_frame,
     run,
     subscribe,
+    workspace_box,
 )
 from tactile_dock_ros.nodes.control_thread import ControlThread
 from tactile_dock_ros.nodes.diagnostics import ExecutorHealth
@@ -122,8 +123,7 @@ CONFIG_PARAMS = [
         0.01,
         600.0,
     ),
-    Param("workspace_min", [-1.0, -1.0], "workspace box lower corner (plane x, y)", "m", length=2),
-    Param("workspace_max", [1.0, 1.0], "workspace box upper corner (plane x, y)", "m", length=2),
+    *workspace_box([-1.0, -1.0], [1.0, 1.0], "workspace box"),
     _tuning("contact_resolution", "length of reported contact segments", "m", 1e-4, 0.1),
     _tuning("waypoint_tolerance", "a waypoint counts as reached within this", "m", 1e-5, 0.05),
     _tuning("slip_tolerance", "displacement under load that counts as slip", "m", 1e-5, 0.05),

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from geometry_msgs.msg import Pose, Quaternion, Vector3
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from tactile_dock_ros.core.history import STATUS_RGBA, History, Status
+from tactile_dock_ros.nodes.convert import plane_point
 
 
 def _strip(header: Header, ns: str, index: int, points, rgba, width: float = 0.003) -> Marker:
@@ -17,7 +18,7 @@ def _strip(header: Header, ns: str, index: int, points, rgba, width: float = 0.0
         id=index,
         type=Marker.LINE_STRIP,
         action=Marker.ADD,
-        points=[Point(x=float(x), y=float(y), z=0.0) for x, y in points],
+        points=[plane_point(xy) for xy in points],
         color=ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
         scale=Vector3(x=width, y=width, z=width),
         pose=Pose(orientation=Quaternion(w=1.0)),

@@ -42,6 +42,7 @@ from tactile_dock_ros.nodes.common import (
     plane_frame,
     run,
     subscribe,
+    workspace_box,
 )
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
@@ -86,21 +87,27 @@ PARAMS = [
         1e-3,
         10.0,
     ),
-    Param(
-        "workspace_min", [-1.1, -1.1], "the arm's own box, lower corner (plane x, y)", "m", length=2
-    ),
-    Param(
-        "workspace_max", [1.1, 1.1], "the arm's own box, upper corner (plane x, y)", "m", length=2
-    ),
+    *workspace_box([-1.1, -1.1], [1.1, 1.1], "the arm's own box"),
     Param("pose_noise", 0.0001, "tool position noise (std per axis)", "m", 0.0, 0.01),
     Param("force_noise", 0.05, "force noise (std per axis)", "N", 0.0, 10.0),
-    Param("force_bias", [0.3, -0.2, 0.5], "constant F/T bias in the base frame", "N", length=3),
+    Param(
+        "force_bias",
+        [0.3, -0.2, 0.5],
+        "constant F/T bias in the base frame",
+        "N",
+        -100,
+        100,
+        length=3,
+    ),
     Param("noise_seed", 1, "seed of the sensor noise", "", 0, 2**31 - 1),
     Param("perception_config", "", "camera pose and depth noise (YAML); '' = no camera"),
     Param(
         "calibration_error",
         [0.01, -0.01, 0.0, 0.0, 0.0, 0.017],
-        "true camera pose minus the configured one (tx ty tz m, rx ry rz rad)",
+        "true camera pose minus the configured one (tx ty tz, rx ry rz)",
+        "m, rad",
+        -0.5,
+        0.5,
         length=6,
     ),
     Param("camera_rate_hz", 2.0, "depth image publication rate", "Hz", 0.1, 60.0),

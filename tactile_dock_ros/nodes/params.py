@@ -36,6 +36,8 @@ class Param:
         text = f"{self.description} [{self.unit}]" if self.unit else self.description
         if self.choices:
             text += f" (one of: {', '.join(self.choices)})"
+        if isinstance(self.default, list) and self.low is not None and self.high is not None:
+            text += f" (each in [{self.low:g}, {self.high:g}])"  # ROS ranges are scalar only
         descriptor = ParameterDescriptor(name=self.name, description=text, read_only=True)
         if self.low is not None and self.high is not None and not isinstance(self.default, list):
             if isinstance(self.default, bool):

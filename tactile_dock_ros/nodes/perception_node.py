@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
@@ -59,7 +59,7 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.holds import HoldStore, evaluate_hold
 from tactile_dock_ros.core.shape import GaussianShape
 from tactile_dock_ros.msg import HoldEvaluation, ShapeDistribution
-from tactile_dock_ros.nodes import convert, markers, planner_node, qos, validate
+from tactile_dock_ros.nodes import convert, markers, planner_node, qos
 from tactile_dock_ros.nodes.common import (
     MAX_HOLDS,
     PLANE_TABLE,
@@ -189,9 +189,8 @@ class PerceptionNode(Node):
         ids = [int(i) for i in request.hold_ids] or self.holds.ids()
         tool = self.tool
         if request.use_tool_position:
-            p = request.tool_position
             try:
-                tool = validate.within("tool_position", [p.x, p.y], validate.MAX_COORDINATE_M, "m")
+                tool = convert.point_xy("tool_position", request.tool_position)
             except convert.MessageError as err:
                 response.success, response.message = False, str(err)
                 return response
@@ -212,9 +211,8 @@ class PerceptionNode(Node):
     def evaluate(self, hold_id: int, tool: np.ndarray) -> HoldEvaluation:
         hold = self.holds.get(hold_id)
         if hold is None:
-            kept = self.holds.ids()
-            return HoldEvaluation(
-                hold_id=hold_id, found=False, reason=f"no hold {hold_id} (kept: {kept})"
+            return convert.hold_not_evaluated_msg(
+                hold_id, f"no hold {hold_id} (kept: {self.holds.ids()})"
             )
         p = self.p
         captured = Header(stamp=Time(nanoseconds=hold.stamp).to_msg(), frame_id=p.plane_frame_id)
@@ -224,27 +222,8 @@ class PerceptionNode(Node):
             )
         except ValueError as err:  # a prior the planner cannot take: said, never raised
             self.get_logger().error(f"hold {hold_id} not evaluated: {err}")
-            return HoldEvaluation(
-                hold_id=hold_id,
-                found=True,
-                header=captured,
-                decision=HoldEvaluation.GIVE_UP,
-                site=Point(x=np.nan, y=np.nan),
-                target_edge=-1,
-                reason=f"not evaluated: {err}",
-            )
-        return HoldEvaluation(
-            hold_id=hold_id,
-            found=True,
-            header=captured,
-            decision=HoldEvaluation.DOCK if result.decision == "dock" else HoldEvaluation.GIVE_UP,
-            site=Point(x=float(result.site[0]), y=float(result.site[1])),
-            target_edge=result.target_edge,
-            site_docking_probability=result.site_p_dock,
-            path_docking_probability=result.path_p_dock,
-            reason=result.reason,
-            compute_time=result.seconds,
-        )
+            return convert.hold_not_evaluated_msg(hold_id, f"not evaluated: {err}", captured)
+        return convert.hold_evaluation_to_msg(hold_id, result, captured)
 
     def on_info(self, msg: CameraInfo) -> None:
         convert.intrinsics_from_camera_info(msg)  # K alone; the image size is checked with it

@@ -91,25 +91,27 @@ from tactile_dock_ros.nodes.common import (
     run,
     stamp_seconds,
     subscribe,
+    workspace_box,
 )
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
     *PLANE_TABLE,
-    Param("load_direction", [0.0, -1.0], "unit load direction f_load in the plane", "", length=2),
+    Param(
+        "load_direction",
+        [0.0, -1.0],
+        "unit load direction f_load in the plane",
+        "",
+        -1,
+        1,
+        length=2,
+    ),
     Param("give_up_threshold", 1e-3, "give up below this docking probability", "", 0.0, 1.0),
     Param("contact_resolution", 0.01, "exploration-bonus width w of eq. (24)", "m", 1e-4, 0.1),
     Param("contact_force_threshold", 3.0, "guarded-move stop force", "N", 0.01, 500.0),
     Param("max_speed", 0.1, "tool speed along the path", "m/s", 1e-4, 1.0),
     Param("compliant", False, "plan with the compliant motion model"),
-    Param(
-        "workspace_min",
-        [-1.0, -1.0],
-        "executor's box, lower corner: no path leaves it",
-        "m",
-        length=2,
-    ),
-    Param("workspace_max", [1.0, 1.0], "executor's box, upper corner (plane x, y)", "m", length=2),
+    *workspace_box([-1.0, -1.0], [1.0, 1.0], "executor's box (no path leaves it)"),
     Param(
         "max_slide",
         PlannerConfig.max_slide,

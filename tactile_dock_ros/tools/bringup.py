@@ -27,7 +27,9 @@ LAUNCH_FILE = PACKAGE_ROOT / "launch" / "tactile_dock.launch.xml"
 def isolate_dds(keep_domain: bool = False) -> None:
     """Put this process and those it starts on a random DDS domain (100-200), discovering peers
     on this machine only: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` (Iron and later) and, on Humble,
-    ``ROS_LOCALHOST_ONLY``. ``keep_domain`` keeps a ``ROS_DOMAIN_ID`` the caller already set."""
+    ``ROS_LOCALHOST_ONLY``. ``keep_domain`` keeps a ``ROS_DOMAIN_ID`` the caller already set.
+    Decision: the domain comes from the OS's entropy, not a seeded generator: runs started at
+    the same time (pytest workers, CI jobs) must not share one, and no result depends on it."""
     if not (keep_domain and "ROS_DOMAIN_ID" in os.environ):
         os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(100, 200))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
