@@ -222,6 +222,31 @@ def test_feasible():
     assert not simulate.feasible(sloper, SLOPE_CLIFF[:3])
 
 
+def _cave(roof_y: float) -> np.ndarray:
+    """A 45 degree slope (too steep) over a cave whose flat floor (y = 0, x in [0, 0.5]) lies
+    under a roof at ``roof_y``, then a 45 degree slope down: no straight move from above
+    touches the floor; a tool gets to it round the overhang's tip at x = 0."""
+    return np.array(
+        [[1.0, 1.5], [0.0, 0.5], [0.0, roof_y], [0.5, roof_y], [0.5, 0.0], [0.0, 0.0], [-1.0, -1.0]]
+    )
+
+
+@pytest.mark.parametrize("compliant", [True, False])
+def test_a_floor_under_an_overhang_is_a_docking_site(compliant):
+    sloper = problems.get("sloper")  # mu = 0.5, load straight down
+    cave = _cave(0.4)
+    assert simulate.feasible(sloper, cave, compliant)
+    assert simulate.holding_margin(sloper, cave, compliant) == pytest.approx(-ALPHA, abs=1e-9)
+    # the simulator agrees: in under the tip, then down onto the floor, it docks
+    ex = _run(cave, [[-0.3, 0.2], [0.25, 0.2], [0.25, -0.1]], compliant)
+    assert ex.docked and ex.stop_feature == Feature("edge", 4)
+    assert np.allclose(ex.stop_point, [0.25, 0.0])
+    # a gap narrower than the loading moves' start (NEAR_START_M): no free start, no site
+    slit = _cave(0.5 * simulate.NEAR_START_M)
+    assert not simulate.feasible(sloper, slit, compliant)
+    assert simulate.holding_margin(sloper, slit, compliant) > 0
+
+
 def test_feasible_without_compliance_needs_a_first_contact_that_sticks():
     sloper = problems.get("sloper")
     # CORNER docks only by sliding into its corner; FLAT sticks where it is touched
@@ -275,13 +300,14 @@ def test_holding_margin_of_a_vertex_trap():
     v = np.array([[1.0, np.sqrt(3.0)], [0.0, 0.0], [-1.0, np.sqrt(3.0)]])
     assert simulate.holding_margin(sloper, v, compliant=True) == pytest.approx(-30.0)
     assert simulate.holding_margin(sloper, v, compliant=False) == pytest.approx(60.0 - ALPHA)
-    # A 45 degree slope slides on into a pocket under a 45 degree roof: the pocket's floor,
-    # 3 degrees too steep, is reached only by that slide; the pocket's back wall overhangs by
-    # 13 degrees, so the slide separates there.
+    # A 45 degree slope slides on into a pocket under a 45 degree roof: the pocket's floor is
+    # 3 degrees too steep, whether the slide reaches it or a path round the roof's edge (no
+    # straight move from above touches it); the pocket's back wall overhangs by 13 degrees, so
+    # the slide separates there.
     s = np.tan(np.deg2rad(ALPHA + 3.0))
     pocket = np.array([[1, 1], [0, 0], [-0.5, -0.5 * s], [-0.2, 1.0], [0.3, 1.2], [-1.0, 2.5]])
     assert simulate.holding_margin(sloper, pocket) == pytest.approx(3.0)
-    assert simulate.holding_margin(sloper, pocket, compliant=False) == pytest.approx(45 - ALPHA)
+    assert simulate.holding_margin(sloper, pocket, compliant=False) == pytest.approx(3.0)
     # CORNER's trap: the wall slid onto faces the load up to 90 degrees
     assert (
         simulate.holding_margin(sloper, CORNER)
