@@ -290,6 +290,12 @@ def test_hardware_messages_round_trip_and_frames_are_checked():
     pose.pose.orientation.x, pose.pose.orientation.w = 1.0, 1.0  # not normalized
     with pytest.raises(MessageError, match="unit quaternion"):
         convert.pose_rotation(pose)
+    np.testing.assert_array_equal(convert.pose_orientation(pose), [1.0, 0.0, 0.0, 1.0])
+    pose.pose.orientation.y = np.nan
+    for read in (convert.pose_orientation, convert.pose_rotation):
+        with pytest.raises(MessageError, match=r"pose\.orientation"):
+            read(pose)
+    pose.pose.orientation.y = 0.0
     pose.pose.orientation.x, pose.pose.orientation.w = 0.0, 0.0
     pose.pose.orientation.z = 1.0  # half a turn about z
     np.testing.assert_allclose(convert.pose_rotation(pose) @ [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0])

@@ -93,10 +93,15 @@ def pose_position(msg, plane: PlaneFrame) -> np.ndarray:
     return plane.point_to_plane(position)
 
 
+def pose_orientation(msg) -> np.ndarray:
+    """geometry_msgs/PoseStamped -> its orientation (4,) x, y, z, w, finite (norm unchecked)."""
+    q = msg.pose.orientation
+    return finite("pose.orientation", [q.x, q.y, q.z, q.w])
+
+
 def pose_rotation(msg) -> np.ndarray:
     """geometry_msgs/PoseStamped -> (3, 3) rotation of the tool frame into the pose's frame."""
-    q = msg.pose.orientation
-    xyzw = finite("pose.orientation", [q.x, q.y, q.z, q.w])
+    xyzw = pose_orientation(msg)
     if abs(np.linalg.norm(xyzw) - 1.0) > 1e-3:
         raise MessageError(f"pose.orientation must be a unit quaternion, got {xyzw.tolist()}")
     return Rotation.from_quat(xyzw).as_matrix()

@@ -50,7 +50,7 @@ from tactile_dock_ros.core.history import History
 from tactile_dock_ros.execution.guarded import ForceFilter, GuardedRun, Limits, Settings
 from tactile_dock_ros.execution.types import PRODUCER_LOST, Outcome, Report
 from tactile_dock_ros.msg import DockingPlan, EpisodeStatus, ExecutionReport
-from tactile_dock_ros.nodes import convert, qos, validate
+from tactile_dock_ros.nodes import convert, qos
 from tactile_dock_ros.nodes.common import (
     PLANE_TABLE,
     header,
@@ -396,8 +396,7 @@ class ExecutorNode(LifecycleNode):
         if self.p.wrench_frame == "tool":  # the rotation is computed only when it is used
             rotation = convert.pose_rotation(msg)
         else:  # but a NaN orientation is malformed input all the same
-            q = msg.pose.orientation
-            validate.finite("pose.orientation", [q.x, q.y, q.z, q.w])
+            convert.pose_orientation(msg)
         with self.sensor_lock:
             if rotation is not None:
                 self.tool_rotation = rotation
