@@ -226,11 +226,11 @@ def crossed_free_pairs(shape_closed: bool, vertices: np.ndarray, history: Histor
         return np.zeros((0, 2), dtype=int)
     ends = v[:, _edges(v.shape[1], shape_closed)]
     pairs = _box_pairs(history, free, ends)
-    sign, lin, const, _ = observation_primitives(history, 0.0)  # free rows: no friction cone
+    sign, lin, const, active = observation_primitives(history, 0.0)  # free rows: no cone
     obs = pairs[:, 0]
     y = ends[:, pairs[:, 1]].reshape(len(v), len(pairs), 4)
-    g4 = pair_values(y, sign[obs, :4], lin[obs, :4], const[obs, :4], True)
-    crossed = np.maximum(-g4.max(axis=-1), g4.min(axis=-1)) > 0
+    g = pair_values(y, sign[obs], lin[obs], const[obs], active[obs])
+    crossed = PairStructure(history.status, pairs).pair_values(g) > 0  # pairs in row order
     return pairs[np.any(crossed, axis=0)]
 
 

@@ -118,6 +118,18 @@ def _validate_vertices(vertices, closed: bool) -> np.ndarray:
     return v
 
 
+def _crossings(c, d, a, move):
+    """Where moves from a (..., 1, 2) along ``move`` meet the lines of edges c->d (..., E, 2):
+    alpha = cross(d - c, move) (> 0: the move enters the solid through the edge), s the
+    fraction along the move, t along the edge (inf or NaN where parallel)."""
+    tangent = d - c
+    alpha = cross(tangent, move)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = cross(tangent, c - a) / alpha
+        t = cross(move, c - a) / alpha
+    return alpha, s, t
+
+
 def first_hits(c: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray):
     """First front-facing crossing of segments a->b with edges c->d (eqs. 4-10, exact).
 
@@ -126,11 +138,7 @@ def first_hits(c: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray):
     """
     a = np.broadcast_to(a, (c.shape[0], 2))[:, None, :]
     move = np.broadcast_to(b, (c.shape[0], 2))[:, None, :] - a
-    tangent = d - c
-    alpha = cross(tangent, move)  # > 0: the move enters the solid through this edge
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = cross(tangent, c - a) / alpha
-        t = cross(move, c - a) / alpha
+    alpha, s, t = _crossings(c, d, a, move)
     valid = (alpha > 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
     s = np.where(valid, s, np.inf)
     edge = np.argmin(s, axis=1) if s.shape[1] else np.zeros(len(s), dtype=int)
@@ -344,13 +352,7 @@ NEAR_START_M = 0.005  # loading moves also start this far before the surface (un
 def _depth_inside(c: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(N,) entering minus leaving crossings of segments a->b (N, 2) with the edges c->d (E, 2):
     0 when b is as much outside the solid as a (``first_hits``' sign convention)."""
-    move = (b - a)[:, None, :]
-    tangent = (d - c)[None]
-    rel = c[None] - a[:, None, :]
-    alpha = cross(tangent, move)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = cross(tangent, rel) / alpha
-        t = cross(move, rel) / alpha
+    alpha, s, t = _crossings(c, d, a[:, None, :], (b - a)[:, None, :])
     crossed = (alpha != 0) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
     return np.sum(np.where(crossed, np.sign(alpha), 0.0), axis=1)
 
