@@ -113,16 +113,21 @@ def test_a_slide_down_a_smooth_slope_is_evidence_on_every_few_centimetres(monkey
 
 
 @pytest.mark.slow
-def test_slides_with_evidence_every_few_centimetres_end_in_a_give_up(monkeypatch):
+def test_slides_with_evidence_every_few_centimetres_teach_that_the_slope_slips(monkeypatch):
     # with one row per piece the other edges of the slope kept their chance to hold and P_dock
-    # stayed at 0.7-0.9 to the cap. Measured on 28 sampler seeds (2026-11-28, Intel Xeon, these
-    # 8 included): 27 gave up within the mock profile's 8 cycles with a row every 4 cm, 3 with
-    # one per piece. One episode's outcome differs between CPUs (floating point): the claim is
-    # a rate over 8 seeds with a margin (at those rates it fails about once in 2000 runs).
-    seeds = range(100, 108)
-    dense = sum(r.outcome == "gave_up" for r in _sloper_slide_episodes(seeds, 8))
-    sparse = sum(r.outcome == "gave_up" for r in _sloper_slide_episodes(seeds, 8, 1.0, monkeypatch))
-    assert dense >= 5 and dense - sparse >= 3, (dense, sparse)
+    # stayed at 0.7-0.9 to the cap. A row every 4 cm brings it below 0.5 (or to a give-up)
+    # within the mock profile's 8 cycles in 21 of 28 sampler seeds (these 16 included: 12),
+    # one row per piece in 5 (3); measured 2026-11-29 on an AMD EPYC. Outcomes differ between
+    # CPUs (floating point): the claim is a difference of rates over 16 seeds with a margin
+    # (binomial at those rates: it fails about once in 250 runs).
+    seeds = range(100, 116)
+
+    def fell(runs):
+        return sum(min((c.plan.p_dock for c in r.cycles_log[1:]), default=0.0) < 0.5 for r in runs)
+
+    dense = fell(_sloper_slide_episodes(seeds, 8))
+    sparse = fell(_sloper_slide_episodes(seeds, 8, 1.0, monkeypatch))
+    assert dense - sparse >= 3, (dense, sparse)
 
 
 def test_a_non_compliant_slip_slides_on_as_evidence_with_slide_on_slip():

@@ -17,7 +17,7 @@ from ros_helpers import spin_until
 from std_msgs.msg import UInt32
 from tactile_dock_ros.msg import ContactHistory, ExecutionReport, ShapeDistribution, ShapeSamples
 
-from tactile_dock_ros.core import problems
+from tactile_dock_ros.core import problems, sampling, slides
 from tactile_dock_ros.core.sampling import Deferral
 from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.nodes import convert, inference_node, qos, warm_start
@@ -105,8 +105,8 @@ def test_a_restarted_node_samples_warm_from_its_saved_posterior(tmp_path, monkey
         deferrals.append(deferral)
         return real_sampler(prior, history, *args, init_z=init_z, deferral=deferral, **kwargs)
 
-    real_sampler = inference_node.sample_posterior
-    monkeypatch.setattr(inference_node, "sample_posterior", recording_sampler)
+    real_sampler = sampling.sample_posterior
+    monkeypatch.setattr(sampling, "sample_posterior", recording_sampler)
     with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
         prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
         episode, _ = _inputs(driver)
@@ -137,8 +137,8 @@ def test_the_node_takes_reports_while_it_samples(tmp_path, monkeypatch):
             assert release.wait(20.0), "the test never released the sampler"
         return real_sampler(prior, history, *args, **kwargs)
 
-    real_sampler = inference_node.sample_posterior
-    monkeypatch.setattr(inference_node, "sample_posterior", blocking_sampler)
+    real_sampler = sampling.sample_posterior
+    monkeypatch.setattr(sampling, "sample_posterior", blocking_sampler)
     spec = launch_nodes("mock")["inference"]
     threads = partial(MultiThreadedExecutor, num_threads=3)  # as inference_node.main runs it
     with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=4"], threads) as (
@@ -180,3 +180,31 @@ def test_the_node_compiles_the_sampler_kernels_at_start_up(tmp_path, monkeypatch
             "tactile_dock_ros.core.descent_scan",
             "tactile_dock_ros.core.hmc_exit",
         ]
+
+
+def test_the_node_publishes_samples_on_which_the_slides_could_happen(tmp_path):
+    """A report of one compliant slide down a 35-degree slope whose edges may hold under the
+    prior: about 72 % of the sampler's draws would contradict it (test_episode_posterior);
+    the node publishes only samples on which it could have happened, under its
+    ``load_direction``: about 56 of 100 after the top-up (49-62 over 10 seeds, one round
+    22-34; test_episode_posterior)."""
+    from test_episode_posterior import HISTORY, LOAD, MU, PRIOR
+
+    spec = launch_nodes("mock")["inference"]
+    with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=100"]) as (
+        node, driver, executor,
+    ):  # fmt: skip
+        np.testing.assert_array_equal(node.load, LOAD)
+        samples = []
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        prior.publish(convert.shape_to_msg(PRIOR, convert.Header(frame_id="dock_plane")))
+        episode.publish(UInt32(data=EPISODE))
+        report = Report(1, ExecutionReport.CONTACT_FAILED, HISTORY, HISTORY.b[-1], "", EPISODE)
+        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == 2, 30.0)
+    vertices = convert.samples_from_msg(samples[-1])
+    assert 35 <= len(vertices) <= 100
+    assert slides.consistent_with_slides(vertices, False, HISTORY, [1, 1], LOAD, MU).all()

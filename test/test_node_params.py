@@ -52,6 +52,7 @@ def test_shared_config_keys_are_used_by_some_node(profile):
         ("inference", "method:=mh", "method: 'mh' is not one of"),  # a benchmark baseline only
         ("inference", "method:=gibbs", "method: 'gibbs' is not one of"),  # biased on depth priors
         ("planner", "load_direction:=[0.0, -0.5]", "load_direction must be a unit vector"),
+        ("inference", "load_direction:=[0.6, 0.6]", "load_direction must be a unit vector"),
         # list parameters: each value within its range
         ("planner", "load_direction:=[0.0, -2.0]", r"load_direction: \[0.0, -2.0\] is below -1"),
         ("executor", "workspace_max:=[500.0, 1.0]", "workspace_max: .* is above 100"),
@@ -100,6 +101,15 @@ def test_the_planner_plans_in_the_executors_workspace_box(profile):
         box = config["executor"]["ros__parameters"][end]
         assert config["planner"]["ros__parameters"][end] == box, end
         assert config["perception"]["ros__parameters"][end] == box, end
+
+
+@pytest.mark.parametrize("profile", ["mock", "robot"])
+def test_inference_conditions_slides_on_the_planners_load(profile):
+    """Inference keeps the samples on which the recorded slides could have happened under the
+    load (``core.episode_posterior``); the profiles give it the planner's load direction."""
+    config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
+    load = config["planner"]["ros__parameters"]["load_direction"]
+    assert config["inference"]["ros__parameters"]["load_direction"] == load
 
 
 @pytest.mark.parametrize("profile", ["mock", "robot"])

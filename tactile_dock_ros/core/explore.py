@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import geometry2d, planner, sampling, simulate, slides
+from . import episode_posterior, geometry2d, planner, simulate, slides
 from .convergence import Convergence
 from .episode import EpisodeState, PlannerConfig
 from .history import History, Status
@@ -42,7 +42,7 @@ class CycleLog:
     inference_seconds: float
     planning_seconds: float
     dropped: int  # observations the sampler ignored as inconsistent
-    rejected: int  # posterior samples on which a recorded slide could not have happened
+    rejected: int  # posterior draws on which a recorded slide could not have happened
     history_length: int  # observations available when this cycle planned
     convergence: Convergence  # the sampler's between-chain check of this cycle's samples
     deferred: int = 0  # observations the sampler left out while their seed search goes on
@@ -101,9 +101,9 @@ def run_episode(
 
     ``rng`` drives every random choice (default: ``np.random.default_rng(0)``), so the same
     seed gives the same episode. The loop holds an ``episode.EpisodeState``: posterior chains
-    are warm-started from the previous cycle's samples (``sampling.sample_posterior(init_z=...)``)
-    and each history row records its cycle (from 1), so the planner drops samples on which a
-    recorded compliant slide could not have happened (``slides``).
+    are warm-started from the previous cycle's samples and each history row records its cycle
+    (from 1), so the samples are drawn until ``n_samples`` are ones on which every recorded
+    compliant slide could have happened (``episode_posterior.draw``, ``slides``).
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
@@ -131,16 +131,13 @@ def run_episode(
     try:
         for cycle in range(max_cycles):
             t0 = time.perf_counter()
-            post = sampling.sample_posterior(
+            post = episode_posterior.draw(
                 prior,
-                state.history,
+                state,
                 n_samples,
                 rng,
-                method,
-                init_z=state.warm_start,
-                known_dropped=state.dropped,
-                deferral=state.deferral,  # rows set aside while their seed search goes on
-                seed_round_restarts=sampling.SEED_ROUND_RESTARTS,  # the rest: next cycle
+                config.load,
+                method=method,
                 threads=sampler_threads,
             )
             t1 = time.perf_counter()
@@ -161,7 +158,7 @@ def run_episode(
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
                 deferred=len(post.deferred),
-                rejected=decision.rejected,
+                rejected=decision.rejected + post.info.get("slide_rejected", 0),
                 history_length=len(state.history),
                 convergence=post.convergence,
             )

@@ -14,6 +14,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
+import numpy as np
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -22,7 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Header
 
-from tactile_dock_ros.execution.types import PlaneFrame
+from tactile_dock_ros.execution.types import UNIT_TOLERANCE, PlaneFrame
 from tactile_dock_ros.nodes import validate
 from tactile_dock_ros.nodes.params import Param
 from tactile_dock_ros.nodes.validate import MessageError
@@ -68,6 +69,26 @@ def workspace_box(low: list[float], high: list[float], whose: str) -> list[Param
         )
         for end, corner, side in (("min", low, "lower"), ("max", high, "upper"))
     ]
+
+
+# The load both the planner (docking) and inference (the slides it conditions on) assume.
+LOAD_DIRECTION = Param(
+    "load_direction",
+    [0.0, -1.0],
+    "unit load direction f_load in the plane (give planner, inference and perception the same)",
+    "",
+    -1,
+    1,
+    length=2,
+)
+
+
+def unit_load(values) -> np.ndarray:
+    """The ``load_direction`` parameter as a (2,) array; ValueError unless a unit vector."""
+    load = np.asarray(values.load_direction, float)
+    if abs(np.linalg.norm(load) - 1.0) > UNIT_TOLERANCE:
+        raise ValueError(f"parameter load_direction must be a unit vector, got {load}")
+    return load
 
 
 # Captured holds kept by perception, and their priors by the planner and inference (one bound).

@@ -8,8 +8,9 @@ sent for a plan of the planner and is dropped, ``watchdog.EpisodeGate.authentic`
 Keeps the history in a ``core.episode.EpisodeState`` (each row with the plan that observed it; the
 previous posterior, the sampler's warm start), publishes it latched on ``contact_history`` (once an
 episode id came) and, after every change while an episode runs, samples the posterior with
-``core.sampling.sample_posterior`` and publishes ``shape_samples`` (latched) and RViz markers on
-``~/markers``.
+``core.episode_posterior.draw`` (``num_samples`` draws on which every recorded compliant slide
+could have happened, under ``load_direction``: the planner's, the profiles give both the same)
+and publishes ``shape_samples`` (latched) and RViz markers on ``~/markers``.
 
 Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.ReceivedPriors``, the
 last ``max_holds``, as the planner keeps them); the episode samples on the hold its
@@ -51,11 +52,11 @@ from rclpy.time import Time
 from std_msgs.msg import UInt32
 from visualization_msgs.msg import MarkerArray
 
-from tactile_dock_ros.core import descent_scan, hmc_exit
+from tactile_dock_ros.core import descent_scan, episode_posterior, hmc_exit
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.history import History
 from tactile_dock_ros.core.holds import ReceivedPriors
-from tactile_dock_ros.core.sampling import NODE_METHODS, SEED_ROUND_RESTARTS, sample_posterior
+from tactile_dock_ros.core.sampling import NODE_METHODS
 from tactile_dock_ros.execution.types import Report
 from tactile_dock_ros.msg import (
     ContactHistory,
@@ -65,7 +66,15 @@ from tactile_dock_ros.msg import (
     ShapeSamples,
 )
 from tactile_dock_ros.nodes import convert, journal, markers, qos, warm_start
-from tactile_dock_ros.nodes.common import MAX_HOLDS, PLANE_FRAME_ID, header, run, subscribe
+from tactile_dock_ros.nodes.common import (
+    LOAD_DIRECTION,
+    MAX_HOLDS,
+    PLANE_FRAME_ID,
+    header,
+    run,
+    subscribe,
+    unit_load,
+)
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.nodes.watchdog import EpisodeGate
 
@@ -78,6 +87,7 @@ PARAMS = [
         choices=NODE_METHODS,
     ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
+    LOAD_DIRECTION,
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param(
         "sampler_threads",
@@ -104,6 +114,7 @@ class InferenceNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("inference", **kwargs)
         self.p = declare(self, PARAMS)
+        self.load = unit_load(self.p)
         started = time.perf_counter()
         hmc_exit.warm_up()  # compiles on the first start after an install (~10 s), then cached
         descent_scan.warm_up()
@@ -335,16 +346,13 @@ class InferenceNode(Node):
             return
         history = state.history
         try:
-            posterior = sample_posterior(
+            posterior = episode_posterior.draw(
                 prior,
-                history,
+                state,
                 self.p.num_samples,
                 self.rng,
+                self.load,
                 method=self.p.method,
-                init_z=state.warm_start,  # warm start from the previous cycle's posterior
-                known_dropped=state.dropped,  # rows judged inconsistent stay out
-                deferral=state.deferral,  # rows set aside while their seed search goes on
-                seed_round_restarts=SEED_ROUND_RESTARTS,  # the rest: next cycle
                 threads=self.p.sampler_threads,
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
@@ -395,7 +403,9 @@ class InferenceNode(Node):
             f"{len(posterior.vertices)} {posterior.method} samples, ESS {posterior.ess:.1f}, "
             f"R-hat {posterior.convergence.rhat:.3f}, "
             f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}, "
-            f"deferred {len(posterior.deferred)}"
+            f"deferred {len(posterior.deferred)}, "
+            f"{posterior.info.get('slide_rejected', 0)} of "
+            f"{posterior.info.get('slide_draws', len(posterior.z))} draws ruled out by slides"
         )
         check = posterior.convergence
         if check.reseeded or not check.converged:

@@ -82,6 +82,7 @@ from tactile_dock_ros.msg import (
 )
 from tactile_dock_ros.nodes import convert, journal, qos, validate
 from tactile_dock_ros.nodes.common import (
+    LOAD_DIRECTION,
     MAX_HOLDS,
     PLANE_TABLE,
     Stopwatch,
@@ -91,21 +92,14 @@ from tactile_dock_ros.nodes.common import (
     run,
     stamp_seconds,
     subscribe,
+    unit_load,
     workspace_box,
 )
 from tactile_dock_ros.nodes.params import Param, declare
 
 PARAMS = [
     *PLANE_TABLE,
-    Param(
-        "load_direction",
-        [0.0, -1.0],
-        "unit load direction f_load in the plane",
-        "",
-        -1,
-        1,
-        length=2,
-    ),
+    LOAD_DIRECTION,
     Param("give_up_threshold", 1e-3, "give up below this docking probability", "", 0.0, 1.0),
     Param("contact_resolution", 0.01, "exploration-bonus width w of eq. (24)", "m", 1e-4, 0.1),
     Param("contact_force_threshold", 3.0, "guarded-move stop force", "N", 0.01, 500.0),
@@ -147,11 +141,8 @@ CONFIG_SETTINGS = (
 def planner_config(p) -> PlannerConfig:
     """The planner parameters (``PARAMS`` values, by attribute) as ``core.planner`` settings:
     the one mapping, shared with ``tools.replay``."""
-    load = np.asarray(p.load_direction, float)
-    if abs(np.linalg.norm(load) - 1.0) > convert.UNIT_TOLERANCE:
-        raise ValueError(f"parameter load_direction must be a unit vector, got {load}")
     return PlannerConfig(
-        load=load,
+        load=unit_load(p),
         contact_resolution=p.contact_resolution,
         give_up_threshold=p.give_up_threshold,
         compliant=p.compliant,

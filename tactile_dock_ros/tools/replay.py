@@ -19,9 +19,10 @@ not exist from the working directory is taken from the installed package share
 used is logged. The planner is
 deterministic: with the recorded parameters every replayed plan equals the recorded one, so a
 difference means the code or a parameter changed. ``--resample N`` plans with N fresh posterior
-samples instead (``core.sampling.sample_posterior`` from the prior and history, cold-started,
-seeded), which separates inference noise from planning. Exit status 0 when every cycle was
-replayed.
+samples instead (``core.episode_posterior.draw`` as the inference node draws them, from the
+prior and history, cold-started, seeded: no row dropped yet, the samples conditioned on the
+recorded slides under the plan's load), which separates inference noise from planning. Exit
+status 0 when every cycle was replayed.
 """
 
 from __future__ import annotations
@@ -36,9 +37,9 @@ from types import SimpleNamespace
 import numpy as np
 import yaml
 
-from ..core import planner
+from ..core import episode_posterior, planner
 from ..core.episode import EpisodeState, PlannerConfig
-from ..core.sampling import METHODS, sample_posterior
+from ..core.sampling import METHODS
 from ..core.shape import GaussianShape
 from . import bag, figures, package_files
 
@@ -306,7 +307,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="override the motion model (default: as recorded in each plan)",
     )
-    parser.add_argument("--resample", type=int, default=0, metavar="N", help="fresh samples")
+    parser.add_argument(
+        "--resample",
+        type=int,
+        default=0,
+        metavar="N",
+        help="plan on N fresh posterior samples (as inference draws them)",
+    )
     parser.add_argument("--method", default="hmc", choices=METHODS)
     parser.add_argument("--seed", type=int, default=0, help="seed of --resample")
     parser.add_argument("--png", type=Path, help="write one panel per cycle")
@@ -329,8 +336,10 @@ def main(argv: list[str] | None = None) -> int:
     for cycle in cycles:
         fresh = None
         if args.resample:
-            fresh = sample_posterior(
-                cycle.prior, cycle.state.history, args.resample, rng, method=args.method
+            cold = replace(cycle.state, dropped=(), warm_start=None, deferral=None)
+            load = cycle.recorded.load
+            fresh = episode_posterior.draw(
+                cycle.prior, cold, args.resample, rng, load, method=args.method
             )
         plans.append(replan(cycle, settings, fresh))
         rows.append(compare(cycle, plans[-1]))

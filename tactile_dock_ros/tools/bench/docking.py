@@ -260,6 +260,7 @@ def _episode(task: _Task) -> dict:
             "cycle_seconds": [],
             "chains_disagree": [],
             "mass_rounds": [],
+            "slide_rejected": [],
         }
     result = explore.run_episode(
         _problem(task.problem),
@@ -287,6 +288,8 @@ def _episode(task: _Task) -> dict:
         "chains_disagree": [_disagree(c.convergence) for c in result.cycles_log],
         # per cycle: re-seed rounds whose chains posterior mass chose (``convergence``)
         "mass_rounds": [c.convergence.mass_rounds for c in result.cycles_log],
+        # per cycle: posterior draws a recorded slide ruled out (``core.episode_posterior``)
+        "slide_rejected": [c.rejected for c in result.cycles_log],
     }
 
 
