@@ -102,8 +102,8 @@ def run_episode(
     ``rng`` drives every random choice (default: ``np.random.default_rng(0)``), so the same
     seed gives the same episode. The loop holds an ``episode.EpisodeState``: posterior chains
     are warm-started from the previous cycle's samples and each history row records its cycle
-    (from 1), so the samples are drawn until ``n_samples`` are ones on which every recorded
-    compliant slide could have happened (``episode_posterior.draw``, ``slides``).
+    (from 1), so the planner gets only samples on which every recorded compliant slide could
+    have happened, topped up when the slides rule out most draws (``episode_posterior.draw``).
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.

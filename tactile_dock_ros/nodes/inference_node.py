@@ -8,9 +8,10 @@ sent for a plan of the planner and is dropped, ``watchdog.EpisodeGate.authentic`
 Keeps the history in a ``core.episode.EpisodeState`` (each row with the plan that observed it; the
 previous posterior, the sampler's warm start), publishes it latched on ``contact_history`` (once an
 episode id came) and, after every change while an episode runs, samples the posterior with
-``core.episode_posterior.draw`` (``num_samples`` draws on which every recorded compliant slide
-could have happened, under ``load_direction``: the planner's, the profiles give both the same)
-and publishes ``shape_samples`` (latched) and RViz markers on ``~/markers``.
+``core.episode_posterior.draw`` (up to ``num_samples`` draws on which every recorded compliant
+slide could have happened under ``load_direction``, the planner's in both profiles; topped up
+when the slides rule out most) and publishes ``shape_samples`` (latched) and RViz markers on
+``~/markers``.
 
 Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.ReceivedPriors``, the
 last ``max_holds``, as the planner keeps them); the episode samples on the hold its
