@@ -212,8 +212,8 @@ def test_inference_started_after_eight_captures_samples_only_the_latest(tmp_path
             assert release.wait(20.0), "the test never released the sampler"
         return real_sampler(prior, *args, **kwargs)
 
-    real_sampler = inference_node.sample_posterior
-    monkeypatch.setattr(inference_node, "sample_posterior", blocking_sampler)
+    real_sampler = sampling.sample_posterior
+    monkeypatch.setattr(sampling, "sample_posterior", blocking_sampler)
     spec = launch_nodes("mock")["inference"]
     threads = partial(inference_node.DrainingExecutor, num_threads=3)  # as its main runs it
     received = []
