@@ -601,7 +601,9 @@ def executor_exit(
     start the executor again (``Probe.respawn``) and wait until it is ready.
 
     Returns ``distance_m``: how far the tool moved from its position at the signal until at
-    rest (base frame; the mock's own ``command_timeout`` bounds it when no stop comes);
+    rest (base frame; the mock's own ``command_timeout`` bounds it when no stop comes; None
+    when no pose came before the signal or the tool was not seen at rest within 10 s:
+    ``at_rest`` and ``poses_after_signal``, the poses received after it, tell which);
     ``zero_command``: a zero command stamped after the signal arrived; ``moving_after_zero``:
     moving commands stamped after that one; the exit code; ``error`` when the arm never moved."""
     name = signal.Signals(signum).name
@@ -641,6 +643,8 @@ def executor_exit(
         "zero_command": zero is not None,
         "moving_after_zero": 0 if zero is None else sum(v > 0.0 for v in after[zero:]),
         "respawned": ready,
+        "at_rest": bool(rest),
+        "poses_after_signal": sum(t > t_signal for t, _ in probe.rec.poses),
     }
 
 
