@@ -91,8 +91,8 @@ def draw(
         threads=threads,
     )
     keep = _consistent(shape, state, first, load)
-    passed, ess, drawn, post = [first.z[keep]], [first.ess * _share(keep)], len(keep), first
-    count = int(keep.sum())
+    rounds, post = [(first, keep)], first  # each call's draws and which of them passed
+    drawn, count = len(keep), int(keep.sum())
     budget, enough = top_up_draws * n_samples, int(np.ceil(TOP_UP_SHARE * n_samples))
     while count < enough and drawn < budget and len(post.z):  # a round gave none: stop
         expected = max(-(-(n_samples - count) * drawn // max(count, 1)), 1)  # at the share so far
@@ -107,19 +107,18 @@ def draw(
             threads=threads,
         )
         more = _consistent(shape, state, post, load)
-        passed.append(post.z[more])
-        ess.append(post.ess * _share(more))
+        rounds.append((post, more))
         drawn, count = drawn + len(more), count + int(more.sum())
     info = {**first.info, "slide_draws": drawn, "slide_rejected": drawn - count}
     if count < 2:  # the planner keeps all and reports its own count
         info["slide_rejected"] = 0
         return dataclasses.replace(first, info=info, seconds=time.perf_counter() - start)
-    z = np.concatenate(passed)[:n_samples]
+    z = np.concatenate([p.z[m] for p, m in rounds])[:n_samples]
     return dataclasses.replace(
         first,
         z=z,
         vertices=shape.vertices(z),
-        ess=float(sum(ess)),
+        ess=float(sum(p.ess * _share(m) for p, m in rounds)),
         seconds=time.perf_counter() - start,
         info=info,
     )

@@ -158,7 +158,7 @@ def run_episode(
                 planning_seconds=t2 - t1,
                 dropped=len(post.dropped),
                 deferred=len(post.deferred),
-                rejected=decision.rejected + post.info.get("slide_rejected", 0),
+                rejected=decision.rejected + post.info["slide_rejected"],
                 history_length=len(state.history),
                 convergence=post.convergence,
             )

@@ -405,8 +405,8 @@ class InferenceNode(Node):
             f"R-hat {posterior.convergence.rhat:.3f}, "
             f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}, "
             f"deferred {len(posterior.deferred)}, "
-            f"{posterior.info.get('slide_rejected', 0)} of "
-            f"{posterior.info.get('slide_draws', len(posterior.z))} draws ruled out by slides"
+            f"{posterior.info['slide_rejected']} of {posterior.info['slide_draws']} draws ruled "
+            "out by slides"
         )
         check = posterior.convergence
         if check.reseeded or not check.converged:
