@@ -82,7 +82,7 @@ from .. import package_files
 from . import calibration
 from .splits import add_split_argument, split_seed
 
-PRIORS = ("problem", "depth")  # the default, and the priors of ``bench posterior``
+PRIORS = ("problem", "depth")  # the default priors (``learned`` runs when asked)
 DOCKING_PRIORS = (*PRIORS, "learned")  # learned: only when asked
 TERRAIN_CLASSES = Path("config/terrain_classes.npz")
 CLEARLY_INFEASIBLE_DEG = 1.0  # holding margin from which an infeasible truth is clearly so
@@ -150,6 +150,38 @@ def add_slide_argument(parser) -> None:
     )
 
 
+def add_library_arguments(parser) -> None:
+    """The learned prior's class library and gate (``--prior learned``)."""
+    parser.add_argument(
+        "--terrain-classes",
+        type=Path,
+        default=TERRAIN_CLASSES,
+        help="terrain class library of the learned prior (tools.fit_terrain_classes; default: "
+        "the shipped one; a relative path missing here is taken from the package share)",
+    )
+    parser.add_argument(
+        "--min-inlier-fraction",
+        type=float,
+        default=None,
+        help="out-of-library gate of the learned prior, in [0, 1] (0: never falls back; "
+        "default: the library's fitted gate)",
+    )
+
+
+def load_library(args) -> tuple[TerrainLibrary, Path, float]:
+    """The class library ``add_library_arguments`` named, its resolved path and the gate it
+    applies; exits with the option's name on a bad file or gate."""
+    try:
+        path = package_files.resolve(args.terrain_classes)
+        library = TerrainLibrary.load(path)
+    except (OSError, ValueError) as err:
+        raise SystemExit(f"--terrain-classes: {err}") from err
+    try:
+        return library, path, gate_threshold(library, args.min_inlier_fraction)
+    except ValueError as err:
+        raise SystemExit(f"--min-inlier-fraction: {err}") from err
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--instances", type=_at_least(1), default=20, help="truths per problem")
     parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
@@ -166,20 +198,7 @@ def add_arguments(parser) -> None:
         help="problem: the hand-made prior; depth: perceived from the mock camera; learned: the "
         "same image conditioned on the terrain class library (--terrain-classes)",
     )
-    parser.add_argument(
-        "--terrain-classes",
-        type=Path,
-        default=TERRAIN_CLASSES,
-        help="terrain class library of the learned prior (tools.fit_terrain_classes; default: "
-        "the shipped one; a relative path missing here is taken from the package share)",
-    )
-    parser.add_argument(
-        "--min-inlier-fraction",
-        type=float,
-        default=None,
-        help="out-of-library gate of the learned prior, in [0, 1] (0: never falls back; "
-        "default: the library's fitted gate)",
-    )
+    add_library_arguments(parser)
     parser.add_argument(
         "--mode",
         nargs="+",
@@ -715,15 +734,7 @@ def run(args) -> dict:
     if "depth" in args.prior or "learned" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
     if "learned" in args.prior:
-        try:
-            library_path = package_files.resolve(args.terrain_classes)
-            library = TerrainLibrary.load(library_path)
-        except (OSError, ValueError) as err:
-            raise SystemExit(f"--terrain-classes: {err}") from err
-        try:
-            gate = gate_threshold(library, args.min_inlier_fraction)
-        except ValueError as err:
-            raise SystemExit(f"--min-inlier-fraction: {err}") from err
+        library, library_path, gate = load_library(args)
     depth_config = config if "depth" in args.prior else None
     truths = {
         name: _truths(args, name, instances, depth_config, args.split, library, config)

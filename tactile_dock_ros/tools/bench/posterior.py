@@ -25,7 +25,9 @@ the pooled runs lie farther from the reference runs than those lie from each oth
 Example: ``python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance
 19 --prior depth --cycles 3 5 7 --json out.json``. Two runs of 1000 particles took 5-14 min per
 cycle on three_ledges (37-115 rows; the constraint evaluations of the elliptical slice moves);
-``--quick`` runs 2 cycles with 200 particles. ``--repeats`` is not used.
+``--quick`` runs 2 cycles with 200 particles. ``--repeats`` is not used. ``--prior learned``
+checks the sampler on the robot's prior (perception's ``prior_source: learned`` of the same
+image): its posteriors are narrow, so ``--reference rejection`` reaches several cycles.
 """
 
 from __future__ import annotations
@@ -38,14 +40,16 @@ from tactile_dock_ros.core import explore, planner, problems, reference, samplin
 from tactile_dock_ros.perception.config import PerceptionConfig
 from tactile_dock_ros.tools import package_files
 from tactile_dock_ros.tools.bench.docking import (
+    DOCKING_PRIORS,
     MODES,
-    PRIORS,
     _at_least,
     _problem,
     _truths,
     add_episode_arguments,
+    add_library_arguments,
     add_slide_argument,
     episode_seed,
+    load_library,
 )
 
 
@@ -57,7 +61,15 @@ def add_replay_arguments(parser, instance: int, seed: int) -> None:
     parser.add_argument(
         "--instance", type=_at_least(0), default=instance, help="truth index, as in bench docking"
     )
-    parser.add_argument("--prior", default="depth", choices=PRIORS)
+    parser.add_argument(
+        "--prior",
+        default="depth",
+        choices=DOCKING_PRIORS,
+        help="problem: the hand-made prior; depth: the mock camera's; learned: the same image "
+        "conditioned on the terrain class library (--terrain-classes; the generic depth prior "
+        "where the gate sends the image)",
+    )
+    add_library_arguments(parser)
     parser.add_argument("--mode", default="compliant", choices=MODES)
     parser.add_argument("--strategy", default="ours", choices=explore.STRATEGIES)
     parser.add_argument(
@@ -76,14 +88,19 @@ def replay_episode(args, max_cycles: int):
     """The truth (``docking._truths``' entry), the prior, the ``explore.CycleView`` of every
     cycle and the result of the episode ``add_replay_arguments`` chose, capped at
     ``max_cycles``."""
-    config = None
-    if args.prior == "depth":
+    config, library = None, None
+    if args.prior != "problem":
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    truth = _truths(args, args.problem, args.instance + 1, config)[args.instance]
+    if args.prior == "learned":
+        library = load_library(args)[0]
+    depth_config = config if args.prior == "depth" else None
+    truths = _truths(args, args.problem, args.instance + 1, depth_config, "train", library, config)
+    truth = truths[args.instance]
     problem = _problem(args.problem)
-    shape = problem.prior if args.prior == "problem" else truth["depth"]
+    shape = problem.prior if args.prior == "problem" else truth[args.prior]
     if shape is None:
-        raise SystemExit(f"no depth prior for this truth: {truth['perception_error']}")
+        error = truth.get("perception_error", truth.get("learned_perception_error"))
+        raise SystemExit(f"no {args.prior} prior for this truth: {error}")
     views: list[explore.CycleView] = []
     result = explore.run_episode(
         problem,
@@ -404,6 +421,9 @@ def run(args) -> dict:
         "problem": args.problem,
         "instance": args.instance,
         "prior": args.prior,
+        # learned: which model perception chose (the class, or the generic fallback)
+        "learned_model": truth.get("learned_model"),
+        "learned_class": truth.get("learned_class"),
         "mode": args.mode,
         "strategy": args.strategy,
         "feasible": truth["feasible"][args.mode],
