@@ -222,6 +222,15 @@ def test_attempt_calibration_scores_only_executed_attempts():
     (cal,) = docking.attempt_calibration([{**row, "episodes": same}])
     z = calibration.clustered_spiegelhalter_z(*attempts, [0, 0, 0, 0, 2])
     assert cal["spiegelhalter_z_by_truth"] == pytest.approx(z) and cal["truths"] == 2
+    # the calibrated floor clusters by (truth, attempt number): the two first attempts on
+    # truth 4 are one cluster, its two second attempts another, the cap's episode a third
+    clusters = ["4#0", "4#1", "4#0", "4#1", "x#0"]
+    floor = calibration.calibrated_ece(
+        attempts[0], clusters, np.random.default_rng(docking.ECE_FLOOR_SEED)
+    )
+    assert cal["ece_calibrated_median"] == pytest.approx(np.median(floor))
+    assert cal["ece_calibrated_p95"] == pytest.approx(np.percentile(floor, 95))
+    assert 0 < cal["ece_calibrated_median"] <= cal["ece_calibrated_p95"] <= 1
 
 
 def test_reliability_pngs_one_per_prior_and_mode(tmp_path):

@@ -115,3 +115,34 @@ def test_clustered_z_refuses_a_label_count_mismatch_and_gives_no_test_without_va
     with pytest.raises(ValueError):
         calibration.clustered_spiegelhalter_z([0.5, 0.5], [0, 1], [0])
     assert calibration.clustered_spiegelhalter_z([0.0, 1.0], [0, 1], [0, 1]) == 0.0
+
+
+def test_a_calibrated_predictors_ece_floor_counts_clusters_not_attempts():
+    """Copies that share a cluster (a truth's same attempt in 9 episodes) add nothing: the
+    floor of 9 copies of 300 attempts is that of the 300, draw for draw; as 2,700 independent
+    attempts it is lower. At 1,000 independent attempts the median is ~0.02."""
+    rng = np.random.default_rng(5)
+    p = rng.uniform(0.0, 1.0, 300)
+    alone = calibration.calibrated_ece(p, np.arange(300), np.random.default_rng(1), draws=200)
+    copies = calibration.calibrated_ece(
+        np.repeat(p, 9), np.repeat(np.arange(300), 9), np.random.default_rng(1), draws=200
+    )
+    np.testing.assert_allclose(copies, alone)
+    independent = calibration.calibrated_ece(
+        np.repeat(p, 9), np.arange(2700), np.random.default_rng(1), draws=200
+    )
+    assert np.median(independent) < 0.7 * np.median(alone)
+    thousand = calibration.calibrated_ece(
+        rng.uniform(0.0, 1.0, 1000), np.arange(1000), np.random.default_rng(2), draws=200
+    )
+    assert 0.01 < np.median(thousand) < 0.035 and np.all(thousand >= 0)
+
+
+def test_the_calibrated_floor_refuses_bad_input():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="one label per attempt"):
+        calibration.calibrated_ece([0.2, 0.4], [0], rng)
+    with pytest.raises(ValueError, match="draws"):
+        calibration.calibrated_ece([0.2, 0.4], [0, 1], rng, draws=0)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        calibration.calibrated_ece([0.2, 1.4], [0, 1], rng)

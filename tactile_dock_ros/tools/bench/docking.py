@@ -468,6 +468,7 @@ def _summary(episodes: list[dict]) -> dict:
 
 
 CALIBRATION_BINS = (0.0, 0.1, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
+ECE_FLOOR_SEED = 0  # the outcome draws of ``calibration.calibrated_ece``
 
 
 def _attempts(episode: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -481,10 +482,10 @@ def _attempts(episode: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def attempts_by_group(results: list[dict]) -> dict[tuple, tuple[np.ndarray, ...]]:
-    """(prior, mode, strategy) -> (predicted P_dock, docked, truth label) of the executed
-    attempts, problems pooled (the label: problem and instance, all episodes on one truth
-    share it; an episode without an instance is its own truth); groups without an executed
-    attempt are left out."""
+    """(prior, mode, strategy) -> (predicted P_dock, docked, truth label, attempt number from
+    0 within its episode) of the executed attempts, problems pooled (the label: problem and
+    instance, all episodes on one truth share it; an episode without an instance is its own
+    truth); groups without an executed attempt are left out."""
     groups: dict[tuple, list[tuple[str, dict]]] = {}
     for row in results:
         key = (row["prior"], row["mode"], row["strategy"])
@@ -498,7 +499,8 @@ def attempts_by_group(results: list[dict]) -> dict[tuple, tuple[np.ndarray, ...]
         if len(predicted):
             docked = np.concatenate([d for _, _, d in pairs])
             truths = np.concatenate([[t] * len(p) for t, p, _ in pairs])
-            out[key] = (predicted, docked, truths)
+            number = np.concatenate([np.arange(len(p)) for _, p, _ in pairs])
+            out[key] = (predicted, docked, truths, number)
     return out
 
 
@@ -507,11 +509,18 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
     docked, Brier score (mean squared difference, lower is better), the expected calibration
     error (``calibration.ECE_BINS`` equal bins), Spiegelhalter's z (|z| > 1.96 rejects
     calibration), the same z grouped by truth (``calibration.clustered_spiegelhalter_z``: the
-    test when ``--episode-seeds`` repeats each truth) and per bin of CALIBRATION_BINS (the last
-    bin includes 1) the attempts, mean prediction and docked fraction."""
+    test when ``--episode-seeds`` repeats each truth), the median and 95th percentile of the
+    ECE a calibrated predictor scores on the same attempts, clustered by truth and attempt
+    number (``calibration.calibrated_ece``, seeded: the same figures for the same results) and
+    per bin of CALIBRATION_BINS (the last bin includes 1) the attempts, mean prediction and
+    docked fraction."""
     out = []
     for (prior, mode, strategy), arrays in attempts_by_group(results).items():
-        predicted, docked, truths = arrays
+        predicted, docked, truths, number = arrays
+        clusters = np.char.add(truths.astype(str), np.char.add("#", number.astype(str)))
+        floor = calibration.calibrated_ece(
+            predicted, clusters, np.random.default_rng(ECE_FLOOR_SEED)
+        )
         which = np.clip(np.digitize(predicted, CALIBRATION_BINS) - 1, 0, len(CALIBRATION_BINS) - 2)
         bins = [
             {
@@ -534,6 +543,8 @@ def attempt_calibration(results: list[dict]) -> list[dict]:
                 "docked_fraction": float(docked.mean()),
                 "brier": float(np.mean((predicted - docked) ** 2)),
                 "ece": calibration.expected_calibration_error(predicted, docked),
+                "ece_calibrated_median": float(np.median(floor)),
+                "ece_calibrated_p95": float(np.percentile(floor, 95)),
                 "spiegelhalter_z": calibration.spiegelhalter_z(predicted, docked),
                 "spiegelhalter_z_by_truth": calibration.clustered_spiegelhalter_z(
                     predicted, docked, truths
@@ -560,8 +571,13 @@ def write_reliability_pngs(results: list[dict], folder: Path) -> list[Path]:
 
 CALIBRATION_HEADER = (
     f"{'prior':7} {'mode':13} {'strategy':8} {'attempts':>8} {'predicted':>9} {'docked':>6} "
-    f"{'brier':>5} {'ECE':>5} {'z':>5} {'z/truth':>7}  bins"
+    f"{'brier':>5} {'ECE':>5} {'calibrated ECE':>14} {'z':>5} {'z/truth':>7}  bins"
 )
+
+
+def _floor(row: dict) -> str:
+    """A calibrated predictor's ECE on the same attempts: median (95th percentile)."""
+    return f"{row['ece_calibrated_median']:.3f} ({row['ece_calibrated_p95']:.3f})"
 
 
 def _calibration_line(row: dict) -> str:
@@ -573,7 +589,8 @@ def _calibration_line(row: dict) -> str:
     return (
         f"{row['prior']:7} {row['mode']:13} {row['strategy']:8} {row['attempts']:>8} "
         f"{row['predicted_mean']:>9.2f} {row['docked_fraction']:>6.2f} {row['brier']:>5.3f} "
-        f"{row['ece']:>5.3f} {row['spiegelhalter_z']:>5.2f} "
+        f"{row['ece']:>5.3f} {_floor(row):>14} "
+        f"{row['spiegelhalter_z']:>5.2f} "
         f"{row['spiegelhalter_z_by_truth']:>7.2f}  {bins}"
     )
 
