@@ -10,6 +10,8 @@ import signal
 
 import numpy as np
 import pytest
+import rclpy
+from rclpy.context import Context
 
 from tactile_dock_ros.nodes import executor_node
 from tactile_dock_ros.tools import safety
@@ -159,6 +161,26 @@ def test_control_loop_keeps_its_period_under_10x_sensor_rate_and_plan_bursts(tmp
 
 def _exit_ok(row) -> bool:
     return row.get("exit_code") == 0 and row.get("zero_command") and row["moving_after_zero"] == 0
+
+
+@pytest.mark.parametrize("record_sensors", [True, False])
+def test_the_probe_is_ready_only_once_it_recorded_a_pose_and_a_wrench(record_sensors):
+    """Readiness includes the probe's own sensor subscriptions: ``executor_exit`` measures the
+    tool's travel from the last pose before the signal, which a subscription that matched
+    after the move began never received (distance None, seen in a fresh-clone CI run)."""
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        probe = safety.Probe(context, record_sensors)
+        waits = "pose and wrench recorded" in probe.not_ready()
+        probe.rec.poses.append((0.0, np.zeros(3)))
+        still = "pose and wrench recorded" in probe.not_ready()
+        probe.rec.wrenches.append((0.0, np.zeros(3)))
+        recorded = "pose and wrench recorded" in probe.not_ready()
+        probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert (waits, still, recorded) == ((True, True, False) if record_sensors else (False,) * 3)
 
 
 def test_sigterm_of_the_executor_mid_move_commands_zero_before_it_exits(tmp_path):

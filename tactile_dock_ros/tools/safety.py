@@ -116,6 +116,7 @@ class Probe(Node):
         self.episode = 0
         self.nonce = 0  # the episode nonce of the last status (0: none), on every plan
         self.next_id = 1
+        self.record_sensors = record_sensors
         self.plan_pub = self.create_publisher(DockingPlan, "/plan", qos.EVENTS)
         self.status_pub = self.create_publisher(EpisodeStatus, "/episode_status", qos.LATCHED)
         # every command, also while this node is busy republishing (the reader's queue fills
@@ -199,8 +200,11 @@ class Probe(Node):
         return bool(done())
 
     def wait_ready(self, timeout_s: float = 60.0) -> bool:
-        """Plans matched, commands matched, the services up and the executor's diagnostics
-        showing both sensor streams."""
+        """Plans matched, commands matched, the services up, the executor's diagnostics
+        showing both sensor streams and, when this probe records them, a pose and a wrench
+        received here (the executor receiving them says nothing of this node's own
+        subscriptions: one that matched only after a move began left no pose before it, and a
+        test measuring from there found none)."""
 
         return self.spin_until(lambda: not self.not_ready(), timeout_s)
 
@@ -211,6 +215,8 @@ class Probe(Node):
             "command publisher": self.count_publishers(COMMAND) > 0,
             "drop services": all(c.service_is_ready() for c in self.drop_clients.values()),
             "diagnostics without ERROR": self.sensors_flowing(),
+            "pose and wrench recorded": not self.record_sensors
+            or bool(self.rec.poses and self.rec.wrenches),
         }
         return [name for name, ok in checks.items() if not ok]
 
