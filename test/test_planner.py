@@ -41,7 +41,8 @@ def test_plan_is_free_then_loads_through_target_edge(name):
     assert shapely.intersects(shapely.LineString([a, b]), shapely.LineString([c, d]))
     posterior = GaussianShape.from_samples(samples, problem.prior.closed, problem.friction)
     whole = probsim.dock_probability(posterior, plan.path, problem.load)
-    holding = planner.holding_frequencies(samples, False, problem.load, problem.friction)
+    draws = planner.hold_evidence(samples, problem.prior, EpisodeState(), 1e-3)
+    holding = planner.holding_frequencies(draws, False, problem.load, problem.friction)
     expected = planner.capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding)
     assert plan.p_dock == pytest.approx(expected, rel=1e-9, abs=1e-12)
     assert plan.p_dock <= whole.p_dock + 1e-12  # the cap only removes probability
@@ -364,3 +365,48 @@ def test_no_path_leaves_the_workspace_box(name):
 def test_a_bad_workspace_box_is_refused(box):
     with pytest.raises(ValueError, match="workspace"):
         PlannerConfig(workspace=box)
+
+
+def _rarely_holding_prior_and_no_holding_samples():
+    """Sloper's prior at friction 0.3 (an edge holds in ~0.3-0.7 % of draws) and 100 of its
+    draws in which nothing holds."""
+    prior = problems.get("sloper").prior
+    shape = GaussianShape(prior.mean, prior.basis, prior.closed, 0.3, prior.closure_edges)
+    load = problems.get("sloper").load
+    for seed in range(100):
+        samples = shape.vertices(shape.sample_z(np.random.default_rng(seed), 100))
+        q_edge, q_vertex = planner.holding_frequencies(samples, False, load, 0.3)
+        if q_edge.max() == 0 and q_vertex.max() == 0:
+            return shape, samples
+    raise AssertionError("no seed drew 100 samples without a hold")
+
+
+def test_the_first_cycle_counts_prior_draws_before_giving_up(monkeypatch):
+    """No hold in the 100 samples: the first cycle still docks, because the prior's own draws
+    (up to 3 / threshold) show holds; with the draws cut to the samples it gives up."""
+    problem = problems.get("sloper")
+    shape, samples = _rarely_holding_prior_and_no_holding_samples()
+    state = EpisodeState(tool=problem.start)
+    config = PlannerConfig(problem.load, problem.contact_resolution)
+    plan = planner.plan(samples, shape, state, config)
+    assert plan.decision == "dock" and plan.p_dock >= config.give_up_threshold, plan.reason
+    draws = planner.hold_evidence(samples, shape, state, config.give_up_threshold)
+    holding = planner.holding_frequencies(draws, False, problem.load, 0.3)
+    assert 0 < holding[0].max() < 0.02  # rare, and only the prior draws show it
+    monkeypatch.setattr(planner, "PRIOR_DRAWS_MAX", len(samples))
+    cut = planner.plan(samples, shape, state, config)
+    assert cut.decision == "give_up" and "best docking probability" in cut.reason
+
+
+def test_prior_draws_only_before_any_observation_and_up_to_the_rule_of_three():
+    problem = problems.get("sloper")
+    shape, samples = problem.prior, _prior_plan("sloper", count=100)[1]
+    empty = EpisodeState(tool=problem.start)
+    draws = planner.hold_evidence(samples, shape, empty, 1e-3)
+    assert draws.shape == (3000, *samples.shape[1:]) and np.array_equal(draws[:100], samples)
+    assert np.array_equal(draws, planner.hold_evidence(samples, shape, empty, 1e-3))  # seeded
+    assert len(planner.hold_evidence(samples, shape, empty, 0.0)) == planner.PRIOR_DRAWS_MAX
+    assert len(planner.hold_evidence(samples, shape, empty, 1e-2)) == 300
+    assert planner.hold_evidence(samples, shape, empty, 0.05) is samples  # 60 < 100
+    seen = EpisodeState().record(History([[0.0, 2.0]], [[0.0, 1.5]], [Status.FREE]), 1)
+    assert planner.hold_evidence(samples, shape, seen, 1e-3) is samples
