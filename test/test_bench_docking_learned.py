@@ -36,9 +36,7 @@ def test_out_of_library_the_learned_row_gets_the_depth_rows_prior():
     truth = problems.get("notch").sample_ground_truth(np.random.default_rng(1))
     seen = depth_prior(truth, config, np.random.default_rng(7))
     shipped = TerrainLibrary.load(SHIPPED)
-    others = TerrainLibrary(
-        tuple(c for c in shipped.classes if c.name != "notch"), shipped.min_inlier_fraction
-    )
+    others = shipped.without("notch")
     chosen, _ = docking.learned_prior(truth, config, np.random.default_rng(7), others)
     assert chosen.model == "generic"
     assert np.array_equal(chosen.prior.mean, seen.prior.mean)
@@ -53,7 +51,7 @@ def test_bench_docking_quick_with_the_learned_prior(tmp_path):
     assert bench.main([*argv, "--problems", "sloper", "notch", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert Path(report["terrain_classes"]).resolve() == SHIPPED.resolve()
-    assert report["min_inlier_fraction"] == TerrainLibrary.load(SHIPPED).min_inlier_fraction
+    assert report["min_inlier_fraction"] == TerrainLibrary.load(SHIPPED).gates
     models = {n: [t["learned_model"] for t in ts] for n, ts in report["truths"].items()}
     assert report["learned_fallbacks"] == {n: m.count("generic") for n, m in models.items()}
     assert {r["prior"] for r in report["results"]} == {"learned"}

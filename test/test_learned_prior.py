@@ -1,6 +1,7 @@
 """Learned terrain prior: class fitting, the library file, conditioning on a mock-camera image
 and the fitting tool."""
 
+import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -53,20 +54,24 @@ def test_fit_class_rejects_bad_input(truths, kw):
         fit_class("bad", truths, **kw)
 
 
-def _library(gate: float | None = 0.9) -> TerrainLibrary:
-    a = TerrainClass("a", np.arange(6.0).reshape(3, 2), np.eye(6)[:, :2], False, 0.4)
-    b = TerrainClass("b", np.ones((4, 2)), 0.1 * np.eye(8), True, 0.7)
-    return TerrainLibrary((a, b), gate)
+def _library(gates: tuple[float | None, float | None] = (0.9, 0.8)) -> TerrainLibrary:
+    a = TerrainClass("a", np.arange(6.0).reshape(3, 2), np.eye(6)[:, :2], False, 0.4, gates[0])
+    b = TerrainClass("b", np.ones((4, 2)), 0.1 * np.eye(8), True, 0.7, gates[1])
+    return TerrainLibrary((a, b))
 
 
-@pytest.mark.parametrize("gate", [0.9, None])
-def test_save_load_round_trip(tmp_path, gate):
-    library = _library(gate)
+@pytest.mark.parametrize("gates", [(0.9, 0.8), (None, 0.7), (None, None)])
+def test_save_load_round_trip(tmp_path, gates):
+    library = _library(gates)
     path = tmp_path / "lib.npz"
     library.save(path)
     loaded = TerrainLibrary.load(path)
     assert loaded.names == ["a", "b"]
-    assert loaded.min_inlier_fraction == gate
+    assert loaded.gates == {"a": gates[0], "b": gates[1]}
+    assert loaded.without("a").gates == {"b": gates[1]}
+    assert _library().with_gates({"a": 0.5, "b": 0.6}).gates == {"a": 0.5, "b": 0.6}
+    with pytest.raises(KeyError):
+        _library().with_gates({"a": 0.5})
     for c, d in zip(library.classes, loaded.classes, strict=True):
         assert np.array_equal(c.mean, d.mean) and np.array_equal(c.basis, d.basis)
         assert (c.closed, c.friction) == (d.closed, d.friction)
@@ -83,18 +88,21 @@ def test_corrupted_or_wrong_version_files_are_refused(tmp_path):
     path = tmp_path / "lib.npz"
     _library().save(path)
     arrays = dict(np.load(path))
-    np.savez(tmp_path / "v3.npz", **{**arrays, "format_version": np.array(3)})
-    with pytest.raises(ValueError, match="format 3, this code reads 1 and 2"):
-        TerrainLibrary.load(tmp_path / "v3.npz")
-    # format 1 (no gate) still loads, without a gate; format 2 without its gate does not
-    v1 = {k: v for k, v in arrays.items() if k != "min_inlier_fraction"}
+    np.savez(tmp_path / "v4.npz", **{**arrays, "format_version": np.array(4)})
+    with pytest.raises(ValueError, match="format 4, this code reads 1 and 2 and 3"):
+        TerrainLibrary.load(tmp_path / "v4.npz")
+    # format 1 (no gate) loads without gates; format 2's one gate becomes every class's
+    v1 = {k: v for k, v in arrays.items() if not k.startswith("min_inlier_fraction")}
     np.savez(tmp_path / "v1.npz", **{**v1, "format_version": np.array(1)})
-    assert TerrainLibrary.load(tmp_path / "v1.npz").min_inlier_fraction is None
+    assert TerrainLibrary.load(tmp_path / "v1.npz").gates == {"a": None, "b": None}
+    v2 = {**v1, "format_version": np.array(2), "min_inlier_fraction": np.array(0.95)}
+    np.savez(tmp_path / "v2.npz", **v2)
+    assert TerrainLibrary.load(tmp_path / "v2.npz").gates == {"a": 0.95, "b": 0.95}
     np.savez(tmp_path / "nogate.npz", **v1)
-    with pytest.raises(ValueError, match=r"malformed.*min_inlier_fraction"):
+    with pytest.raises(ValueError, match=r"malformed.*min_inlier_fraction_0"):
         TerrainLibrary.load(tmp_path / "nogate.npz")
-    np.savez(tmp_path / "badgate.npz", **{**arrays, "min_inlier_fraction": np.array(1.5)})
-    with pytest.raises(ValueError, match="malformed"):
+    np.savez(tmp_path / "badgate.npz", **{**arrays, "min_inlier_fraction_1": np.array(1.5)})
+    with pytest.raises(ValueError, match=r"malformed.*b: min_inlier_fraction"):
         TerrainLibrary.load(tmp_path / "badgate.npz")
     np.savez(tmp_path / "nov.npz", **{k: v for k, v in arrays.items() if k != "format_version"})
     with pytest.raises(ValueError, match="no format_version"):
@@ -152,10 +160,11 @@ def test_tool_writes_a_loadable_library_from_train_truths_only(tmp_path, capsys)
     assert fit_terrain_classes.main(argv) == 0
     library = TerrainLibrary.load(out)
     assert library.names == problems.names()
-    # the gate lies between what the classes explain of their own scans and of the others'
+    # each class's gate lies between what it explains of its own scans and of the others'
     inside, outside = fit_terrain_classes.gate_samples(library, PerceptionConfig.load(CONFIG), 4, 2)
-    assert np.min(inside) > 0.9 and np.max(outside) < np.min(inside)
-    assert np.max(outside) < library.min_inlier_fraction < np.min(inside)
+    for name, gate in library.gates.items():
+        assert inside[name].size == 4 and np.min(inside[name]) > 0.9
+        assert np.max(outside[name], initial=0.0) < gate < np.min(inside[name])
     for c in library.classes:
         problem = problems.get(c.name)
         assert c.n_vertices == problem.prior.n_vertices and c.friction == problem.friction
@@ -181,3 +190,31 @@ def test_tool_rejects_bad_arguments(bad, tmp_path, capsys):
     assert exit_info.value.code == 2
     assert "error:" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_the_inlier_fraction_leaves_out_bins_at_a_depth_step():
+    step = learned_prior.DEPTH_STEP_M
+    ranges = np.array(
+        [1.0, 1.001, 1.002, 1.002 + 1.5 * step, 1.003 + 1.5 * step, 1.004 + 1.5 * step]
+    )
+    k = len(ranges)
+    rays = learned_prior.SliceRays(
+        np.zeros((k, 2)), np.tile([0.0, -1.0], (k, 1)), ranges, np.full(k, 0.001), np.zeros(2)
+    )
+    assert rays.at_depth_step.tolist() == [False, False, True, True, False, False]
+    # a held-out notch image (test base seed 0, truth 0): its outliers are the notch corner's
+    # and the grazing first rays' mixed bins, all at depth steps; counted, it would fall back
+    config = PerceptionConfig.load(CONFIG)
+    library = TerrainLibrary.load(SHIPPED)
+    base, p = split_seed("test", 0), problems.names().index("notch")
+    truth = problems.get("notch").sample_ground_truth(np.random.default_rng([*base, p, 0]))
+    rng = np.random.default_rng([*base, p, 0, 2])
+    camera = MockCamera()
+    depth = camera.render(truth, config, draw_calibration_error(config.extrinsic, rng), rng)
+    rays = learned_prior.slice_rays(depth, camera.K, config)
+    fit = learned_prior.condition_rays(library, rays, config).best
+    assert fit.name == "notch" and np.mean(fit.inliers) < library.get("notch").min_inlier_fraction
+    assert not np.any(~fit.inliers & ~rays.at_depth_step)
+    assert fit.inlier_fraction == 1.0
+    nothing = dataclasses.replace(fit, counted=np.zeros_like(fit.counted))
+    assert nothing.inlier_fraction == 0.0  # no bin counted: out of library

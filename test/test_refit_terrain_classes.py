@@ -75,7 +75,7 @@ def test_em_pulls_a_displaced_template_back_to_the_walls_the_scans_see():
         error = [np.sqrt(np.mean((c.mean - target) ** 2)) for c in (start, after)]
         assert error[1] < error[0], (start.name, error)
         assert after.n_vertices == start.n_vertices and after.closed == start.closed
-    assert refitted.min_inlier_fraction is None  # the template's gate: none
+    assert refitted.gates == template.gates == {name: None for name in template.names}
 
 
 def test_refit_argument_checks_and_widening():
@@ -104,7 +104,7 @@ def test_tool_writes_a_gated_library_the_node_loads(scans, tmp_path, capsys):
     assert refit_terrain_classes.main([*argv, "--iterations", "1", "--min-scans", "3"]) == 0
     library = TerrainLibrary.load(out)
     assert library.names == ["sloper", "notch", "three_ledges"]
-    assert 0.0 < library.min_inlier_fraction < 1.0
+    assert all(0.0 < gate < 1.0 for gate in library.gates.values())
     printed = capsys.readouterr().out
     assert "21 of 21 scans give a slice" in printed and "3 left out" in printed
     assert printed.count("(kept)") == 1

@@ -9,7 +9,7 @@ occlusion), on the first valid frame (``capture: first_frame``) or on the next f
 cannot use is logged and skipped. ``prior_source: learned`` conditions the learned terrain
 classes of ``terrain_classes`` (``tools.fit_terrain_classes``) on the same image
 (``perception.prior_select``): the best class's posterior when it explains at least
-``min_inlier_fraction`` of the slice (-1: the library's own gate, fitted on training scans),
+``min_inlier_fraction`` of the slice (-1: the class's own gate, fitted on training scans),
 else, out of library, the generic depth prior of that image with a warning.
 ``prior_source: problem`` publishes the prior of a benchmark problem instead (fast and exact;
 the mock terrain is drawn from that same prior). RViz markers on ``~/markers``; ``~/status``
@@ -72,7 +72,7 @@ from tactile_dock_ros.nodes.common import (
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.learned_prior import TerrainLibrary
-from tactile_dock_ros.perception.prior_select import SelectedPrior, gate_threshold, select_prior
+from tactile_dock_ros.perception.prior_select import SelectedPrior, gate_thresholds, select_prior
 from tactile_dock_ros.perception.terrain_prior import perceive
 from tactile_dock_ros.srv import EvaluateHold
 
@@ -101,7 +101,7 @@ PARAMS = [
         "min_inlier_fraction",
         -1.0,
         "out-of-library gate: least fraction of slice bins the best class must explain, "
-        "else the generic depth prior is used (-1: the library's fitted gate)",
+        "else the generic depth prior is used (-1: each class's fitted gate)",
         "",
         -1.0,
         1.0,
@@ -157,14 +157,15 @@ class PerceptionNode(Node):
             self.config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
-        self.library, self.gate = None, None
+        self.library, self.gates = None, None
         if source == "learned":
-            self.library, self.gate = load_library(
+            self.library, self.gates = load_library(
                 self.p.terrain_classes, self.p.min_inlier_fraction
             )
+            gates = ", ".join(f"{name} {gate:.3f}" for name, gate in self.gates.items())
             self.get_logger().info(
-                f"learned prior: classes {self.library.names} of {self.p.terrain_classes}, "
-                f"out-of-library gate {self.gate:.3f} (fraction of slice bins)"
+                f"learned prior: classes of {self.p.terrain_classes}, out-of-library gates "
+                f"(fraction of slice bins) {gates}"
             )
         camera = self.p.camera_frame_id or None
         subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
@@ -245,7 +246,10 @@ class PerceptionNode(Node):
                 if self.library is None:
                     prior = perceive(depth, K, self.config, self.rng).prior
                 else:
-                    chosen = select_prior(depth, K, self.config, self.library, self.rng, self.gate)
+                    override = (
+                        self.p.min_inlier_fraction if self.p.min_inlier_fraction >= 0 else None
+                    )
+                    chosen = select_prior(depth, K, self.config, self.library, self.rng, override)
                     prior, values = chosen.prior, learned_status(chosen)
                     source += f", {chosen.model} prior: {chosen.reason}"
                     fell_back = chosen.model == "generic"
@@ -294,9 +298,9 @@ class PerceptionNode(Node):
         )
 
 
-def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary, float]:
-    """The class library and the gate to apply (``min_inlier_fraction`` < 0: the library's);
-    ValueError naming the parameter when either is unusable."""
+def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary, dict[str, float]]:
+    """The class library and the gate to apply per class (``min_inlier_fraction`` < 0: each
+    class's own); ValueError naming the parameter when either is unusable."""
     if not path:
         raise ValueError("parameter terrain_classes is required for prior_source: learned")
     try:
@@ -304,10 +308,10 @@ def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary,
     except (OSError, ValueError) as err:
         raise ValueError(f"parameter terrain_classes: {err}") from err
     try:
-        gate = gate_threshold(library, None if min_inlier_fraction < 0 else min_inlier_fraction)
+        gates = gate_thresholds(library, None if min_inlier_fraction < 0 else min_inlier_fraction)
     except ValueError as err:
         raise ValueError(f"parameter min_inlier_fraction: {err}") from err
-    return library, gate
+    return library, gates
 
 
 def learned_status(chosen: SelectedPrior) -> list[KeyValue]:

@@ -27,8 +27,8 @@ it, widened.
 Decisions: hard assignment (a scan's evidence margin between classes is tens of nats on the
 mock's images, soft weights would be 0 or 1); the E-step's Laplace posterior is the
 linearization the node uses, so the refit class is the one the node's conditioning is
-consistent with; the gate of the result is refitted separately (``tools.fit_terrain_classes``
-measures it on rendered scans; for scans alone the refit keeps the input library's gate).
+consistent with; the gates of the result are refitted separately (``tools.fit_terrain_classes``
+measures it on rendered scans; for scans alone the refit keeps the input library's gates).
 The mean log evidence per assigned scan is reported per step; the library of the largest is
 kept.
 """
@@ -36,7 +36,7 @@ kept.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -89,7 +89,7 @@ def refit_library(
     classes are widened by ``init_floor_m`` first. Of the libraries the steps went through, the
     one of largest mean log evidence per assigned scan is kept (the Laplace E-step does not make
     EM monotone: measured, the evidence fell at the fourth step). The result keeps
-    ``library``'s gate."""
+    ``library``'s gates."""
     if iterations < 1 or min_scans < 2:
         raise ValueError(f"need iterations >= 1 and min_scans >= 2, got {iterations}, {min_scans}")
     if not (0.0 <= min_inlier_fraction <= 1.0 and init_floor_m >= 0.0):
@@ -97,8 +97,7 @@ def refit_library(
             f"need min_inlier_fraction in [0, 1] and init_floor_m >= 0, got "
             f"{min_inlier_fraction}, {init_floor_m}"
         )
-    gate = library.min_inlier_fraction
-    libraries = [TerrainLibrary(tuple(_widened(c, init_floor_m) for c in library.classes), gate)]
+    libraries = [TerrainLibrary(tuple(_widened(c, init_floor_m) for c in library.classes))]
     steps = []
     for step in range(iterations + 1):
         current = libraries[-1]
@@ -126,7 +125,7 @@ def refit_library(
             dev = means - mu
             sigma = dev.T @ dev / len(kept) + np.mean([c for _, c in kept], axis=0)
             classes.append(class_from_moments(terrain, mu, sigma, variance_kept, floor_m))
-        libraries.append(TerrainLibrary(tuple(classes), gate))
+        libraries.append(TerrainLibrary(tuple(classes)))
     kept = int(np.argmax([s.log_evidence for s in steps]))
     return Refit(libraries[kept], tuple(steps), kept)
 
@@ -136,5 +135,4 @@ def _widened(terrain: TerrainClass, floor_m: float) -> TerrainClass:
     if floor_m == 0.0:
         return terrain
     extra = floor_m * np.eye(terrain.basis.shape[0])
-    basis = np.hstack([terrain.basis, extra])
-    return TerrainClass(terrain.name, terrain.mean, basis, terrain.closed, terrain.friction)
+    return replace(terrain, basis=np.hstack([terrain.basis, extra]))

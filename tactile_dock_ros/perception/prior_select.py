@@ -3,18 +3,24 @@ the image, the generic depth prior where it does not (the out-of-library gate).
 
 ``learned_prior.condition`` always returns its best class, even for a wall no class resembles;
 its Gaussian would then be confidently wrong. The gate keeps the learned prior only when the
-best class explains at least ``min_inlier_fraction`` of the slice bins (``ClassFit.inliers``:
-residual within ``learned_prior.GATE`` stds); otherwise ``terrain_prior.perceive`` builds the
-generic prior (paper Sec. III-A1) from the same image.
+best class explains at least that class's ``min_inlier_fraction`` of the slice bins
+(``ClassFit.inlier_fraction``: residual within ``learned_prior.GATE`` stds, bins at a depth
+step not counted); otherwise
+``terrain_prior.perceive`` builds the generic prior (paper Sec. III-A1) from the same image.
 
-Decision (the threshold, :func:`fit_threshold`): measured on training scans only. In-library
-scans are training truths rendered by the camera and conditioned on the whole library;
-out-of-library scans are the same images conditioned on the library without the truth's class
-(the nearest wall the library does not know). The threshold is the midpoint between the
-in-library 1 % quantile and the out-of-library 99 % quantile of the best class's inlier
-fraction; where they overlap (no clean separation) or there is no second class, it is the
-in-library 1 % quantile minus ``SINGLE_CLASS_MARGIN``, so at most ~1 % of in-library images
-fall back (the generic prior is the safe side).
+Decision (the thresholds, :func:`fit_thresholds`): measured on training scans only, one per
+class. In-library scans are training truths rendered by the camera and conditioned on the whole
+library; out-of-library scans are the same images conditioned on the library without the
+truth's class (the nearest wall the library does not know). Both are grouped by the class that
+explains them best, the class whose gate decides. A class's threshold is the midpoint between
+its in-library 1 % quantile and its out-of-library 99 % quantile of the inlier fraction; where
+they overlap (no clean separation) or no out-of-library scan chose the class, it is the
+in-library 1 % quantile minus ``SINGLE_CLASS_MARGIN``, so ~1 % of each class's images fall back
+(the generic prior is the safe side). Why per class (measured on 300 train scans per class,
+docs/perception.md): the classes' tails differ (in-library 1 % quantiles sloper 0.987, notch
+0.972, three_ledges 0.991), and where one class's out-of-library scans reach its own tail a
+pooled threshold is either loose for the others or sends that class's images to the generic
+prior.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ class SelectedPrior:
         prior: the prior to publish.
         model: ``"learned"`` or ``"generic"`` (the gate fell back).
         learned: every class's fit (also when the gate fell back: it says why).
-        min_inlier_fraction: the threshold applied.
+        min_inlier_fraction: the threshold applied (the best class's).
         reason: one line for the log and the status.
     """
 
@@ -58,19 +64,22 @@ class SelectedPrior:
         return self.learned.name if self.model == "learned" else ""
 
 
-def gate_threshold(library: TerrainLibrary, min_inlier_fraction: float | None) -> float:
-    """The threshold to apply: ``min_inlier_fraction`` when given, else the library's.
+def gate_thresholds(library: TerrainLibrary, min_inlier_fraction: float | None) -> dict[str, float]:
+    """The threshold per class: ``min_inlier_fraction`` for every class when given, else each
+    class's own.
 
-    Raises ValueError when neither is set or the value is outside [0, 1]."""
-    gate = library.min_inlier_fraction if min_inlier_fraction is None else min_inlier_fraction
-    if gate is None:
+    Raises ValueError when a class has neither or the value is outside [0, 1]."""
+    if min_inlier_fraction is not None:
+        if not (np.isfinite(min_inlier_fraction) and 0.0 <= min_inlier_fraction <= 1.0):
+            raise ValueError(f"min_inlier_fraction must be in [0, 1], got {min_inlier_fraction}")
+        return {name: float(min_inlier_fraction) for name in library.names}
+    missing = [name for name, gate in library.gates.items() if gate is None]
+    if missing:
         raise ValueError(
-            "the terrain class library has no fitted min_inlier_fraction (format 1): give one "
-            "or refit it with tools.fit_terrain_classes"
+            f"the terrain class library has no fitted min_inlier_fraction for {missing} "
+            "(format 1): give one or refit it with tools.fit_terrain_classes"
         )
-    if not (np.isfinite(gate) and 0.0 <= gate <= 1.0):
-        raise ValueError(f"min_inlier_fraction must be in [0, 1], got {gate}")
-    return float(gate)
+    return {name: float(gate) for name, gate in library.gates.items()}
 
 
 def select_prior(
@@ -83,10 +92,10 @@ def select_prior(
 ) -> SelectedPrior:
     """The learned prior of ``depth`` if its best class passes the gate, else the generic one
     (``rng`` is used only then, by the occlusion sampler). Raises ``PerceptionError`` when the
-    image gives no slice, ValueError when no threshold is known (:func:`gate_threshold`)."""
-    gate = gate_threshold(library, min_inlier_fraction)
+    image gives no slice, ValueError when no threshold is known (:func:`gate_thresholds`)."""
+    gates = gate_thresholds(library, min_inlier_fraction)
     fit = condition(library, depth, K, config)
-    share = fit.inlier_fraction
+    gate, share = gates[fit.name], fit.inlier_fraction
     if share >= gate:
         reason = f"class {fit.name}: {share:.3f} of the slice explained (gate {gate:.3f})"
         return SelectedPrior(fit.prior, "learned", fit, gate, reason)
@@ -99,21 +108,45 @@ def select_prior(
 
 def inlier_samples(
     library: TerrainLibrary, scans: Sequence[tuple[SliceRays, str]], config: PerceptionConfig
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The best class's inlier fraction per scan ``(rays, its class name)`` with the whole
-    library (in library) and with the library without that class (out of library; empty for a
-    one-class library): the two samples :func:`fit_threshold` takes."""
-    inside, outside = [], []
+    library (in library) and with the library without that class (out of library; none for a
+    one-class library), each grouped by the best class's name (every class has an entry, maybe
+    empty): the two samples :func:`fit_thresholds` takes."""
+    inside: dict[str, list[float]] = {name: [] for name in library.names}
+    outside: dict[str, list[float]] = {name: [] for name in library.names}
     for rays, name in scans:
-        inside.append(condition_rays(library, rays, config).inlier_fraction)
-        others = tuple(c for c in library.classes if c.name != name)
-        if others:
-            outside.append(condition_rays(TerrainLibrary(others), rays, config).inlier_fraction)
-    return np.array(inside), np.array(outside)
+        fit = condition_rays(library, rays, config)
+        inside[fit.name].append(fit.inlier_fraction)
+        others = library.without(name)
+        if others.classes:
+            fit = condition_rays(others, rays, config)
+            outside[fit.name].append(fit.inlier_fraction)
+    return _arrays(inside), _arrays(outside)
+
+
+def _arrays(groups: dict[str, list[float]]) -> dict[str, np.ndarray]:
+    return {name: np.array(values) for name, values in groups.items()}
+
+
+def fit_thresholds(
+    in_library: dict[str, np.ndarray], out_of_library: dict[str, np.ndarray]
+) -> dict[str, float]:
+    """Each class's gate from :func:`inlier_samples` (see the module docstring); a class no
+    in-library scan chose gets the threshold of all classes' samples pooled. Raises ValueError
+    when there is no in-library scan at all."""
+    pooled = fit_threshold(
+        np.concatenate([np.ravel(v) for v in in_library.values()] or [[]]),
+        np.concatenate([np.ravel(v) for v in out_of_library.values()] or [[]]),
+    )
+    return {
+        name: fit_threshold(inside, out_of_library.get(name, [])) if np.size(inside) else pooled
+        for name, inside in in_library.items()
+    }
 
 
 def fit_threshold(in_library: np.ndarray, out_of_library: np.ndarray) -> float:
-    """The gate from inlier fractions of training scans (see the module docstring)."""
+    """One class's gate from inlier fractions of training scans (see the module docstring)."""
     inside = np.asarray(in_library, float)
     outside = np.asarray(out_of_library, float)
     if inside.size == 0 or not np.all(np.isfinite(inside)):

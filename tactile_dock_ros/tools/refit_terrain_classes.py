@@ -15,12 +15,13 @@ each class's vertex parametrization (the shipped one, or one ``tools.fit_terrain
 fitted on drawn or CAD shapes). Each scan's slice is conditioned on every class; expectation-
 maximization (``perception.class_refit``) refits each class's mean and covariance from the
 scans it explains best, leaving out scans whose best class explains less than
-``--min-inlier-fraction`` of the slice (walls no class describes). The out-of-library gate is
+``--min-inlier-fraction`` of the slice (walls no class describes). The out-of-library gates are
 then refitted on the same scans (``prior_select.inlier_samples``: each scan with the whole
-refitted library and without its class; ``prior_select.fit_threshold``) and stored in
-``--out``, which perception loads with ``prior_source: learned terrain_classes:=...``. Printed:
-the scans used and skipped, per EM step the scans assigned per class and their mean log
-evidence per scan (the library of the largest is kept), the gate's two samples and the gate.
+refitted library and without its class; ``prior_select.fit_thresholds``, one per class) and
+stored in ``--out``, which perception loads with ``prior_source: learned terrain_classes:=...``.
+Printed: the scans used and skipped, per EM step the scans assigned per class and their mean log
+evidence per scan (the library of the largest is kept), and per class the gate's two samples and
+the gate.
 
 Try it without a robot: ``--render-training N --seed S`` first renders N train-split scenes into
 ``SCANS`` (new) with the mock camera: of every 7, 1 random wall (no class describes it) and 6
@@ -38,9 +39,9 @@ import numpy as np
 from ..perception.class_refit import INIT_FLOOR_M, refit_library
 from ..perception.config import PerceptionConfig, PerceptionError
 from ..perception.learned_prior import TerrainLibrary, slice_rays
-from ..perception.prior_select import fit_threshold, inlier_samples
+from ..perception.prior_select import fit_thresholds, inlier_samples
 from .depth_scans import InputError, depth_images, intrinsics, render_training, scan_files
-from .fit_terrain_classes import quantile_summary
+from .fit_terrain_classes import print_gates
 
 RANDOM_PER_SEVEN = 1  # --render-training: one wall per 7 that no class describes
 
@@ -95,16 +96,12 @@ def run(args) -> TerrainLibrary | None:
     assigned = refit.steps[refit.kept].assigned
     names = [c.name for c in library.classes]
     labelled = [(r, names[k]) for r, k in zip(scans, assigned, strict=True) if k >= 0]
-    refitted = refit.library
-    inside, outside = inlier_samples(refitted, labelled, config)
-    if inside.size == 0:
+    if not labelled:
         raise InputError(f"no scan passed --min-inlier-fraction {args.min_inlier_fraction}")
-    gate = fit_threshold(inside, outside)
-    refitted = TerrainLibrary(refitted.classes, gate)
+    inside, outside = inlier_samples(refit.library, labelled, config)
+    refitted = refit.library.with_gates(fit_thresholds(inside, outside))
     refitted.save(args.out)
-    print(f"inlier fraction, own class ({inside.size} scans):    {quantile_summary(inside)}")
-    print(f"inlier fraction, without it ({outside.size} scans): {quantile_summary(outside)}")
-    print(f"min_inlier_fraction (the out-of-library gate): {gate:.3f}")
+    print_gates(refitted, inside, outside)
     print(f"wrote {args.out}")
     return refitted
 

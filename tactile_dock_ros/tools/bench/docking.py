@@ -14,10 +14,10 @@ the split). Every truth runs one episode per strategy, per prior and per mode:
   the SAME depth image (same seeds, same draws): the terrain class library ``--terrain-classes``
   (default: the shipped config/terrain_classes.npz, fitted on train truths by
   ``tools.fit_terrain_classes``) conditioned on it, behind the out-of-library gate
-  (``perception.prior_select``, ``--min-inlier-fraction``, default the library's), else the
+  (``perception.prior_select``, ``--min-inlier-fraction``, default each class's), else the
   generic depth prior of that image (then exactly the ``depth`` row's prior); the truth records
   carry the model used, the best class, every class's log-evidence and the inlier fraction, the
-  JSON the library path, the gate and the fallback count;
+  JSON the library path, the gate per class and the fallback count;
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
   (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml; with its
   executor's ``slide_on_slip``, ``--slide-on-slip``, a slip slides on for evidence only,
@@ -77,7 +77,7 @@ from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.learned_prior import TerrainLibrary
 from ...perception.mock_camera import MockCamera, depth_prior, draw_calibration_error
-from ...perception.prior_select import SelectedPrior, gate_threshold, select_prior
+from ...perception.prior_select import SelectedPrior, gate_thresholds, select_prior
 from .. import package_files
 from . import calibration
 from .splits import add_split_argument, split_seed
@@ -163,21 +163,21 @@ def add_library_arguments(parser) -> None:
         "--min-inlier-fraction",
         type=float,
         default=None,
-        help="out-of-library gate of the learned prior, in [0, 1] (0: never falls back; "
-        "default: the library's fitted gate)",
+        help="out-of-library gate of the learned prior for every class, in [0, 1] (0: never "
+        "falls back; default: each class's fitted gate)",
     )
 
 
-def load_library(args) -> tuple[TerrainLibrary, Path, float]:
+def load_library(args) -> tuple[TerrainLibrary, Path, dict[str, float]]:
     """The class library ``add_library_arguments`` named, its resolved path and the gate it
-    applies; exits with the option's name on a bad file or gate."""
+    applies per class; exits with the option's name on a bad file or gate."""
     try:
         path = package_files.resolve(args.terrain_classes)
         library = TerrainLibrary.load(path)
     except (OSError, ValueError) as err:
         raise SystemExit(f"--terrain-classes: {err}") from err
     try:
-        return library, path, gate_threshold(library, args.min_inlier_fraction)
+        return library, path, gate_thresholds(library, args.min_inlier_fraction)
     except ValueError as err:
         raise SystemExit(f"--min-inlier-fraction: {err}") from err
 
@@ -747,11 +747,11 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 def run(args) -> dict:
     instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
-    config, library, library_path, gate = None, None, None, None
+    config, library, library_path, gates = None, None, None, None
     if "depth" in args.prior or "learned" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
     if "learned" in args.prior:
-        library, library_path, gate = load_library(args)
+        library, library_path, gates = load_library(args)
     depth_config = config if "depth" in args.prior else None
     truths = {
         name: _truths(args, name, instances, depth_config, args.split, library, config)
@@ -817,7 +817,7 @@ def run(args) -> dict:
             name: sum(t.get("learned_model") == "generic" for t in entries)
             for name, entries in truths.items()
         }
-        print(f"learned prior: generic fallbacks per problem {fallbacks} (gate {gate:.3f})")
+        print(f"learned prior: generic fallbacks per problem {fallbacks} (gates {gates})")
     calibration = attempt_calibration(results)
     print("\nP_dock of the executed attempts, problems pooled (bins: predicted/docked (attempts))")
     print(CALIBRATION_HEADER)
@@ -840,7 +840,7 @@ def run(args) -> dict:
         "unfinished_episodes": sum(r is None for r in records),
         "perception_config": str(args.perception_config),
         "terrain_classes": None if library_path is None else str(library_path.resolve()),
-        "min_inlier_fraction": gate,
+        "min_inlier_fraction": gates,
         "learned_fallbacks": fallbacks,
         "note": "wall times per process, from a shared 2-core machine "
         f"running {args.workers} episode process(es) of {args.sampler_threads} sampler "

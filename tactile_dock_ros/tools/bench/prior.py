@@ -23,7 +23,7 @@ before the option and is what the depth model was tuned on; the JSON records the
 ``--repeats`` is unused (nothing is timed).
 
 ``--learned`` also scores what perception's ``prior_source: learned`` publishes for the same
-image (``perception.prior_select`` with the ``--terrain-classes`` library and its gate): per
+image (``perception.prior_select`` with the ``--terrain-classes`` library and its gates): per
 kind, the generic fallbacks, the class accuracy, the same 2-sigma band coverage of the truth
 points, and, where the class is the truth's own problem, the vertex coverage (each truth vertex
 inside its vertex's 2-D 2-sigma ellipse, 0.954 for a calibrated Gaussian: the class's vertices
@@ -42,7 +42,7 @@ from ...perception import evaluation, scenes
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.depth import decode_depth, encode_depth
 from ...perception.learned_prior import TerrainLibrary
-from ...perception.prior_select import select_prior
+from ...perception.prior_select import gate_thresholds, select_prior
 from ...perception.render import render_depth
 from ...perception.terrain_prior import perceive
 from .. import package_files
@@ -83,7 +83,7 @@ def add_arguments(parser) -> None:
         "--terrain-classes",
         type=Path,
         default=Path("config/terrain_classes.npz"),
-        help="terrain class library of --learned (its fitted gate is used)",
+        help="terrain class library of --learned (its fitted gates are used)",
     )
     add_split_argument(parser)
 
@@ -327,7 +327,10 @@ def run(args) -> dict:
             f"  {old['median_adjacent_angle_corr']:5.2f} / {new['median_adjacent_angle_corr']:.2f}"
         )
     if library is not None:
-        print(f"\nlearned prior ({args.terrain_classes}, gate {library.min_inlier_fraction:.3f})")
+        gates = ", ".join(
+            f"{name} {gate:.3f}" for name, gate in gate_thresholds(library, None).items()
+        )
+        print(f"\nlearned prior ({args.terrain_classes}, gates {gates})")
         print(
             f"{'terrains':<14}{'n':>4}  {'fallbacks':>9}  {'class ok':>9}  {'coverage':>8}  "
             f"{'vertex coverage':>15}"
