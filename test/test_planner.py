@@ -41,8 +41,7 @@ def test_plan_is_free_then_loads_through_target_edge(name):
     assert shapely.intersects(shapely.LineString([a, b]), shapely.LineString([c, d]))
     posterior = GaussianShape.from_samples(samples, problem.prior.closed, problem.friction)
     whole = probsim.dock_probability(posterior, plan.path, problem.load)
-    draws = planner.hold_evidence(samples, problem.prior, EpisodeState(), 1e-3)
-    holding = planner.holding_frequencies(draws, False, problem.load, problem.friction)
+    holding = planner.holding_frequencies(samples, False, problem.load, problem.friction)
     expected = planner.capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding)
     assert plan.p_dock == pytest.approx(expected, rel=1e-9, abs=1e-12)
     assert plan.p_dock <= whole.p_dock + 1e-12  # the cap only removes probability
@@ -390,9 +389,12 @@ def test_the_first_cycle_counts_prior_draws_before_giving_up(monkeypatch):
     config = PlannerConfig(problem.load, problem.contact_resolution)
     plan = planner.plan(samples, shape, state, config)
     assert plan.decision == "dock" and plan.p_dock >= config.give_up_threshold, plan.reason
-    draws = planner.hold_evidence(samples, shape, state, config.give_up_threshold)
-    holding = planner.holding_frequencies(draws, False, problem.load, 0.3)
+    extra = planner.first_cycle_draws(shape, state, len(samples), config.give_up_threshold)
+    holding = planner.holding_frequencies(
+        np.concatenate([samples, extra]), False, problem.load, 0.3
+    )
     assert 0 < holding[0].max() < 0.02  # rare, and only the prior draws show it
+    assert plan.candidates.p_dock.max() <= holding[0].max() + holding[1].max() * 2
     monkeypatch.setattr(planner, "PRIOR_DRAWS_MAX", len(samples))
     cut = planner.plan(samples, shape, state, config)
     assert cut.decision == "give_up" and "best docking probability" in cut.reason
@@ -402,11 +404,21 @@ def test_prior_draws_only_before_any_observation_and_up_to_the_rule_of_three():
     problem = problems.get("sloper")
     shape, samples = problem.prior, _prior_plan("sloper", count=100)[1]
     empty = EpisodeState(tool=problem.start)
-    draws = planner.hold_evidence(samples, shape, empty, 1e-3)
-    assert draws.shape == (3000, *samples.shape[1:]) and np.array_equal(draws[:100], samples)
-    assert np.array_equal(draws, planner.hold_evidence(samples, shape, empty, 1e-3))  # seeded
-    assert len(planner.hold_evidence(samples, shape, empty, 0.0)) == planner.PRIOR_DRAWS_MAX
-    assert len(planner.hold_evidence(samples, shape, empty, 1e-2)) == 300
-    assert planner.hold_evidence(samples, shape, empty, 0.05) is samples  # 60 < 100
+    extra = planner.first_cycle_draws(shape, empty, 100, 1e-3)
+    assert extra.shape == (2900, *samples.shape[1:])
+    assert np.array_equal(extra, planner.first_cycle_draws(shape, empty, 100, 1e-3))  # seeded
+    assert len(planner.first_cycle_draws(shape, empty, 100, 0.0)) == planner.PRIOR_DRAWS_MAX - 100
+    assert len(planner.first_cycle_draws(shape, empty, 100, 1e-2)) == 200
+    assert len(planner.first_cycle_draws(shape, empty, 100, 0.05)) == 0  # 60 < 100
     seen = EpisodeState().record(History([[0.0, 2.0]], [[0.0, 1.5]], [Status.FREE]), 1)
-    assert planner.hold_evidence(samples, shape, seen, 1e-3) is samples
+    assert len(planner.first_cycle_draws(shape, seen, 100, 1e-3)) == 0
+
+
+def test_a_plan_above_the_threshold_uses_only_its_samples(monkeypatch):
+    """The prior draws are for would-be give-ups only: a first plan that docks on its samples
+    is the same without them."""
+    plan = _prior_plan("three_ledges", count=100)[2]
+    monkeypatch.setattr(planner, "PRIOR_DRAWS_MAX", 0)
+    _, _, alone = _prior_plan("three_ledges", count=100)
+    assert plan.decision == alone.decision == "dock"
+    assert plan.p_dock == alone.p_dock and np.array_equal(plan.path, alone.path)

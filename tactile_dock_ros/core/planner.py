@@ -17,15 +17,19 @@ feature by the samples' frequency of that feature holding the load (``capped_p_d
 Gaussian fit does not encode the history's slip constraints, the samples do. The give-up test
 (Sec. III-B: best P_dock below ``give_up_threshold``) uses the capped values.
 
-Decision (the first cycle's give-up, ``hold_evidence``): the cap's resolution is 1/N, so with
-the inference node's N = 100 samples a give-up below 0.001 reads "no sample holds", which a
-hold of 1 % probability gives 37 % of the time. Before any observation the posterior is the
-prior, whose exact draws are cheap: the first cycle's caps and the whole path's dock check use
-the N samples plus prior draws up to ``ceil(3 / give_up_threshold)`` in all (at most
-``PRIOR_DRAWS_MAX``; no hold in 3 / t draws bounds P(hold) below t at 95 %, the rule of three).
-They come from a generator of fixed seed (``PRIOR_DRAWS_SEED``), so a replay of the journaled
-samples plans the same. Measured: 3000 draws cost 8-130 ms (sloper to three_ledges). Later
-cycles keep the 1/N resolution: their posterior has no cheap exact draws.
+Decision (the first cycle's give-up, ``first_cycle_draws``): the cap's resolution is 1/N, so
+with the inference node's N = 100 samples a give-up below 0.001 reads "no sample holds", which
+a hold of 1 % probability gives 37 % of the time. Before any observation the posterior is the
+prior, whose exact draws are cheap: when the first cycle's best P_dock on the N samples is below
+the threshold, the caps are recomputed over the samples plus prior draws up to
+``ceil(3 / give_up_threshold)`` in all (at most ``PRIOR_DRAWS_MAX``; no hold in 3 / t draws
+bounds P(hold) below t at 95 %, the rule of three), and a path that docks on none of the
+samples is checked on the prior draws too. Only would-be give-ups pay; every other plan is the
+one of the N samples (measured: recounting every first cycle over 3000 draws took
+``/evaluate_hold``'s p99 from 131 to 446-488 ms, ``bench holds``, target 200 ms). The draws
+come from a generator of fixed seed (``PRIOR_DRAWS_SEED``), so a replay of the journaled
+samples plans the same. Later cycles keep the 1/N resolution: their posterior has no cheap
+exact draws.
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
@@ -52,7 +56,7 @@ from .freespace import FreeSpace, likely_obstacle_region
 from .history import History, Status
 from .shape import GaussianShape
 
-PRIOR_DRAWS_MAX = 3000  # first cycle: samples + prior draws for the caps, at most this many
+PRIOR_DRAWS_MAX = 3000  # a first-cycle give-up's samples + prior draws, at most this many
 PRIOR_DRAWS_SEED = 0  # the first cycle's prior draws: fixed, so a replay plans the same
 # An edge faces the load when the push has at least this component against its outward normal.
 _MIN_FACING = 0.05
@@ -282,23 +286,18 @@ def holding_frequencies(
     return q_edge, q_vertex
 
 
-def hold_evidence(
-    samples: np.ndarray, shape: GaussianShape, state: EpisodeState, threshold: float
+def first_cycle_draws(
+    shape: GaussianShape, state: EpisodeState, n_samples: int, threshold: float
 ) -> np.ndarray:
-    """The draws the caps and the whole path's dock check count (``capped_p_dock``,
-    ``whole_path_p_dock``): ``samples``, and before any observation (empty history: the
-    posterior is ``shape``) prior draws up to ``ceil(3 / threshold)`` in all, at most
-    ``PRIOR_DRAWS_MAX`` (module docstring)."""
-    if len(state.history):
-        return samples
+    """Prior draws (M, n, 2) that a would-be give-up also counts (module docstring): before any
+    observation (empty history: the posterior is ``shape``), ``ceil(3 / threshold)`` (at most
+    ``PRIOR_DRAWS_MAX``) minus the ``n_samples`` the planner has; none (M = 0) otherwise."""
     wanted = (
         PRIOR_DRAWS_MAX if threshold <= 0 else min(PRIOR_DRAWS_MAX, int(np.ceil(3 / threshold)))
     )
-    extra = wanted - len(samples)
-    if extra <= 0:
-        return samples
+    extra = 0 if len(state.history) else max(0, wanted - n_samples)
     rng = np.random.default_rng(PRIOR_DRAWS_SEED)
-    return np.concatenate([samples, shape.vertices(shape.sample_z(rng, extra))])
+    return shape.vertices(shape.sample_z(rng, extra))
 
 
 def capped_p_dock(stop_vertex, stop_edge, holding) -> np.ndarray:
@@ -327,10 +326,13 @@ def whole_path_p_dock(
     load: np.ndarray,
     compliant: bool,
     holding: tuple[np.ndarray, np.ndarray],
+    prior_draws: np.ndarray | None = None,
 ) -> float:
     """P_dock of a whole path (L, 2): probsim's estimate under ``posterior`` (the terminal
     move's P_dock times P(the prefix touches nothing)), capped per feature
-    (``capped_p_dock``), and 0 when the path docks on none of the ``samples`` (N, n, 2).
+    (``capped_p_dock``), and 0 when the path docks on none of the ``samples`` (N, n, 2) nor
+    of the first cycle's ``prior_draws`` (``first_cycle_draws``; checked only when no sample
+    docks).
 
     Decision: the per-feature cap cannot see that a feature some samples let hold lies, in
     exactly those samples, where this path does not stop on it. A repeat of a move already
@@ -343,10 +345,14 @@ def whole_path_p_dock(
     p_dock = float(capped_p_dock(whole.p_stop_vertex_sides, whole.p_stop_edge, holding))
     if p_dock == 0.0:
         return 0.0
-    docks = simulate.dock_outcomes(
-        samples, posterior.closed, path, posterior.friction, load, compliant
-    )
-    return p_dock if docks.any() else 0.0
+    for draws in (samples, prior_draws):
+        if draws is not None and len(draws):
+            docks = simulate.dock_outcomes(
+                draws, posterior.closed, path, posterior.friction, load, compliant
+            )
+            if docks.any():
+                return p_dock
+    return 0.0
 
 
 def evaluate(
@@ -407,6 +413,27 @@ def score(
 # give-ups for want of a path, not for want of a hold (``bench episode`` counts them apart)
 NO_WAY_OUT = "the tool is inside the likely-obstacle region with no way out"
 NO_PREFIX = "no collision-free prefix to any promising docking site"
+
+
+def _candidates(samples, shape, state, config, posterior, segments):
+    """``(candidates, holding, prior draws or None)``: the sites' P_dock capped over the samples;
+    a would-be first-cycle give-up recounts the caps with ``first_cycle_draws`` (module
+    docstring)."""
+    load = np.asarray(config.load)
+
+    def capped(draws):
+        holding = holding_frequencies(
+            draws, shape.closed, load, shape.friction, shape.closure_edges
+        )
+        return evaluate(posterior, segments, load, config.compliant, holding), holding
+
+    candidates, holding = capped(samples)
+    if candidates.p_dock.max() >= config.give_up_threshold:
+        return candidates, holding, None
+    extra = first_cycle_draws(shape, state, len(samples), config.give_up_threshold)
+    if not len(extra):
+        return candidates, holding, None
+    return *capped(np.concatenate([samples, extra])), extra
 
 
 def _give_up(rejected: int, reason: str, candidates: Candidates | None = None) -> Plan:
@@ -486,9 +513,7 @@ def plan(
     if len(segments["edges"]) == 0:
         return _give_up(rejected, "no edge of the shape faces the load direction")
     posterior = GaussianShape.from_samples(samples, shape.closed, friction)
-    draws = hold_evidence(samples, shape, state, config.give_up_threshold)
-    holding = holding_frequencies(draws, shape.closed, load, friction, shape.closure_edges)
-    candidates = evaluate(posterior, segments, load, compliant, holding)
+    candidates, holding, extra = _candidates(samples, shape, state, config, posterior, segments)
     best = float(candidates.p_dock.max())
     if best < config.give_up_threshold:
         return _give_up(
@@ -522,7 +547,7 @@ def plan(
         if not config.inside(path):
             outside += 1
             continue
-        p_dock = whole_path_p_dock(posterior, draws, path, load, compliant, holding)
+        p_dock = whole_path_p_dock(posterior, samples, path, load, compliant, holding, extra)
         if objective != "info_gain" and p_dock < config.give_up_threshold:
             unreachable.append(p_dock)
             continue
