@@ -5,8 +5,8 @@ the image, the generic depth prior where it does not (the out-of-library gate).
 its Gaussian would then be confidently wrong. The gate keeps the learned prior only when the
 best class explains at least that class's ``min_inlier_fraction`` of the slice bins
 (``ClassFit.inlier_fraction``: residual within ``learned_prior.GATE`` stds, bins at a depth
-step not counted); otherwise
-``terrain_prior.perceive`` builds the generic prior (paper Sec. III-A1) from the same image.
+step not counted); otherwise ``terrain_prior.perceive`` builds the generic prior (paper Sec.
+III-A1) from the same image.
 
 Decision (the thresholds, :func:`fit_thresholds`): measured on training scans only, one per
 class. In-library scans are training truths rendered by the camera and conditioned on the whole
@@ -77,7 +77,8 @@ def gate_thresholds(library: TerrainLibrary, min_inlier_fraction: float | None) 
     if missing:
         raise ValueError(
             f"the terrain class library has no fitted min_inlier_fraction for {missing} "
-            "(format 1): give one or refit it with tools.fit_terrain_classes"
+            "(a format 1 file, or classes fitted without gates): give one or refit it with "
+            "tools.fit_terrain_classes"
         )
     return {name: float(gate) for name, gate in library.gates.items()}
 
