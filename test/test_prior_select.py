@@ -11,13 +11,14 @@ from node_helpers import launch_nodes, node_from_launch
 from tactile_dock_ros.core import problems
 from tactile_dock_ros.nodes import convert
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
-from tactile_dock_ros.perception.learned_prior import TerrainLibrary
+from tactile_dock_ros.perception.learned_prior import TerrainLibrary, slice_rays
 from tactile_dock_ros.perception.mock_camera import MockCamera, draw_calibration_error
 from tactile_dock_ros.perception.prior_select import (
     SINGLE_CLASS_MARGIN,
     fit_threshold,
     fit_thresholds,
     gate_thresholds,
+    inlier_samples,
     select_prior,
 )
 from tactile_dock_ros.perception.terrain_prior import perceive
@@ -137,6 +138,16 @@ def test_fit_thresholds_gives_each_class_its_own_gate():
     assert fit_thresholds({"a": inside["a"]}, {}) == {"a": fit_threshold(inside["a"], [])}
     with pytest.raises(ValueError):
         fit_thresholds({"a": [], "b": []}, {})
+
+
+def test_a_one_class_library_gets_a_gate_from_its_own_scans():
+    """No second class: no out-of-library sample, the gate is the in-library rule alone."""
+    library = TerrainLibrary((TerrainLibrary.load(SHIPPED).get("notch"),))
+    rays = [slice_rays(_image("notch", i), CAMERA.K, CONFIG) for i in range(3)]
+    inside, outside = inlier_samples(library, [(r, "notch") for r in rays], CONFIG)
+    assert inside["notch"].size == 3 and outside["notch"].size == 0
+    gates = fit_thresholds(inside, outside)
+    assert gates["notch"] == fit_threshold(inside["notch"], [])
 
 
 def _perception(tmp_path, library: TerrainLibrary | None = None, **arguments):

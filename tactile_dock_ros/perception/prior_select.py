@@ -119,9 +119,8 @@ def inlier_samples(
     for rays, name in scans:
         fit = condition_rays(library, rays, config)
         inside[fit.name].append(fit.inlier_fraction)
-        others = library.without(name)
-        if others.classes:
-            fit = condition_rays(others, rays, config)
+        if len(library.classes) > 1:
+            fit = condition_rays(library.without(name), rays, config)
             outside[fit.name].append(fit.inlier_fraction)
     return _arrays(inside), _arrays(outside)
 
