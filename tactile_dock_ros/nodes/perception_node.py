@@ -157,15 +157,15 @@ class PerceptionNode(Node):
             self.config = PerceptionConfig.load(self.p.perception_config)
         except (OSError, PerceptionError) as err:
             raise ValueError(f"parameter perception_config: {err}") from err
-        self.library, self.gates = None, None
+        self.library = None
+        fraction = self.p.min_inlier_fraction
+        self.gate_override = None if fraction < 0 else fraction  # None: each class's own gate
         if source == "learned":
-            self.library, self.gates = load_library(
-                self.p.terrain_classes, self.p.min_inlier_fraction
-            )
-            gates = ", ".join(f"{name} {gate:.3f}" for name, gate in self.gates.items())
+            self.library, gates = load_library(self.p.terrain_classes, self.gate_override)
+            listed = ", ".join(f"{name} {gate:.3f}" for name, gate in gates.items())
             self.get_logger().info(
                 f"learned prior: classes of {self.p.terrain_classes}, out-of-library gates "
-                f"(fraction of slice bins) {gates}"
+                f"(fraction of slice bins) {listed}"
             )
         camera = self.p.camera_frame_id or None
         subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
@@ -246,10 +246,9 @@ class PerceptionNode(Node):
                 if self.library is None:
                     prior = perceive(depth, K, self.config, self.rng).prior
                 else:
-                    override = (
-                        self.p.min_inlier_fraction if self.p.min_inlier_fraction >= 0 else None
+                    chosen = select_prior(
+                        depth, K, self.config, self.library, self.rng, self.gate_override
                     )
-                    chosen = select_prior(depth, K, self.config, self.library, self.rng, override)
                     prior, values = chosen.prior, learned_status(chosen)
                     source += f", {chosen.model} prior: {chosen.reason}"
                     fell_back = chosen.model == "generic"
@@ -298,8 +297,10 @@ class PerceptionNode(Node):
         )
 
 
-def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary, dict[str, float]]:
-    """The class library and the gate to apply per class (``min_inlier_fraction`` < 0: each
+def load_library(
+    path: str, min_inlier_fraction: float | None
+) -> tuple[TerrainLibrary, dict[str, float]]:
+    """The class library and the gate to apply per class (``min_inlier_fraction`` None: each
     class's own); ValueError naming the parameter when either is unusable."""
     if not path:
         raise ValueError("parameter terrain_classes is required for prior_source: learned")
@@ -308,7 +309,7 @@ def load_library(path: str, min_inlier_fraction: float) -> tuple[TerrainLibrary,
     except (OSError, ValueError) as err:
         raise ValueError(f"parameter terrain_classes: {err}") from err
     try:
-        gates = gate_thresholds(library, None if min_inlier_fraction < 0 else min_inlier_fraction)
+        gates = gate_thresholds(library, min_inlier_fraction)
     except ValueError as err:
         raise ValueError(f"parameter min_inlier_fraction: {err}") from err
     return library, gates
