@@ -168,7 +168,8 @@ def test_tool_writes_a_loadable_library_from_train_truths_only(tmp_path, capsys)
     for c in library.classes:
         problem = problems.get(c.name)
         assert c.n_vertices == problem.prior.n_vertices and c.friction == problem.friction
-    assert "wrote" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and "holding edges: class / held-out truths" in printed
     # its truths are none of bench docking's (train or test) for the same seed
     ours = fit_terrain_classes.training_truths("notch", 30, 2)
     for split in ("train", "test"):
@@ -218,3 +219,23 @@ def test_the_inlier_fraction_leaves_out_bins_at_a_depth_step():
     assert fit.inlier_fraction == 1.0
     nothing = dataclasses.replace(fit, counted=np.zeros_like(fit.counted))
     assert nothing.inlier_fraction == 0.0  # no bin counted: out of library
+
+
+def test_the_hold_check_flags_a_class_whose_floor_makes_holds():
+    """The check compares a class's holding edges with held-out truths': the 0.71 mm floor that
+    0.1 % of three_ledges' dropped variance makes tilts its ledge tops into holds the truths do
+    not have (1.3x); keeping 99.999 % with a 0.05 mm floor does not. Sloper's and notch's
+    shipped classes hold as their truths do."""
+    truths = fit_terrain_classes.training_truths("three_ledges", 400, 0)
+
+    def ratio(library: TerrainLibrary) -> dict[str, float]:
+        check = fit_terrain_classes.holding_check(library, 0)
+        return {k: v["class_holding_edges"] / v["truths_holding_edges"] for k, v in check.items()}
+
+    wide = fit_class("three_ledges", truths, variance_kept=0.999, floor_m=0.0003)
+    assert ratio(TerrainLibrary((wide,)))["three_ledges"] > 1.2
+    tight = fit_class("three_ledges", truths, variance_kept=0.99999, floor_m=0.00005)
+    assert ratio(TerrainLibrary((tight,)))["three_ledges"] < 1.05
+    shipped = ratio(TerrainLibrary.load(SHIPPED))
+    assert set(shipped) == set(problems.names())
+    assert 0.95 < shipped["sloper"] < 1.05 and 0.95 < shipped["notch"] < 1.05, shipped

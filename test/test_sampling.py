@@ -727,6 +727,24 @@ def test_mass_gap_names_the_wider_likelier_group_and_chain_groups_splits_cluster
     np.testing.assert_array_equal(high, [0, 1, 2, 3, 5, 7, 9, 11, 13, 15])
 
 
+@pytest.mark.parametrize("chains, dim", [(16, 10), (40, 164)])
+def test_chain_groups_needs_no_svd(chains, dim, monkeypatch):
+    """LAPACK's SVD failed to converge on a finite matrix of chain means (``chain_groups``), which
+    ended a cycle: the split works without it, on as many coordinates as chains or more."""
+
+    def no_svd(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(np.linalg, "svd", no_svd)
+    rng = np.random.default_rng(1)
+    draws = rng.normal(0.0, 1.0, size=(chains, 8, dim))
+    pocket = np.arange(0, chains, 4)
+    draws[pocket, :, dim // 2] += 8.0
+    low, high = convergence.chain_groups(draws)
+    np.testing.assert_array_equal(low, pocket)
+    np.testing.assert_array_equal(high, np.setdiff1d(np.arange(chains), pocket))
+
+
 class _WalkRunner:
     """A random walk (step 0.1) that, with ``kick``, throws the first chain of every call to
     z_0 = 20: a chain the exact test (patched to z_0 < 5) never passes."""

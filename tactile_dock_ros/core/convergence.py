@@ -137,14 +137,19 @@ def chain_groups(draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     chain means lie along one direction with the widest gap between them: on the late
     depth-prior cycle of ``chain_log_mass`` a cold run with 8 of 16 chains in a pocket (R-hat
     4.0, 2.7 std off) had no chain named, and this split found the seeds' two groups
-    exactly."""
+    exactly.
+
+    Decision: the projections are the top eigenvector of the chains' Gram matrix (C, C), which
+    is the first principal axis' projection up to a positive scale. LAPACK's SVD (gesdd) did not
+    converge on a finite, well-scaled 125 x 164 matrix of chain means (learned three_ledges
+    prior, 2026-11-29, OpenBLAS on an AMD EPYC), which ended the cycle with an error."""
     x = np.asarray(draws, dtype=float)
     centre, scale = _robust_centre_and_std(x)
     means = x.mean(axis=1)
     means = (means - means.mean(axis=0)) / np.maximum(scale, 1e-12 * (1 + np.abs(centre)))
-    axis = np.linalg.svd(means, full_matrices=False)[2][0]
-    order = np.argsort(means @ axis, kind="stable")
-    cut = int(np.argmax(np.diff((means @ axis)[order]))) + 1
+    projection = np.linalg.eigh(means @ means.T)[1][:, -1]
+    order = np.argsort(projection, kind="stable")
+    cut = int(np.argmax(np.diff(projection[order]))) + 1
     low, high = np.sort(order[:cut]), np.sort(order[cut:])
     return (low, high) if low.size <= high.size else (high, low)
 

@@ -266,10 +266,8 @@ def holding_frequencies(
     0.98-1.0 for 12 cycles on three_ledges truths 9 and 19, with a camera that sees the whole
     wall: no contact ever came, and the rigid tail could not learn).
     """
-    n = samples.shape[1]
-    edges, left, right = simulate.edge_index_arrays(n, closed)
-    tangents = samples[:, edges[:, 1]] - samples[:, edges[:, 0]]
-    flags = tangents @ simulate.friction_functionals(load, friction).T > 0.0  # (N, E, 3)
+    edges, left, right = simulate.edge_index_arrays(samples.shape[1], closed)
+    flags = simulate.edge_flags(samples, closed, load, friction)  # (N, E, 3)
     slip_left, slip_right, faces = flags[..., 0], flags[..., 1], flags[..., 2]
     holds = faces & ~slip_left & ~slip_right
     pad = np.zeros((len(samples), 1), dtype=bool)  # edge index -1 (missing neighbour)

@@ -152,6 +152,19 @@ def _classify(tangents: np.ndarray, load, friction: float) -> np.ndarray:
     return tangents @ friction_functionals(load, friction).T > 0.0
 
 
+def edge_flags(vertices: np.ndarray, closed: bool, load, friction: float) -> np.ndarray:
+    """(N, E, 3) booleans slide-left, slide-right, faces-load of every edge of shapes (N, n, 2)."""
+    edges, _, _ = edge_index_arrays(vertices.shape[1], closed)
+    return _classify(vertices[:, edges[:, 1]] - vertices[:, edges[:, 0]], load, friction)
+
+
+def holding_edges(vertices: np.ndarray, closed: bool, load, friction: float) -> np.ndarray:
+    """(N, E) whether each edge of shapes (N, n, 2) holds the load: it faces the load and
+    slips neither way (eq. 12)."""
+    flags = edge_flags(vertices, closed, load, friction)
+    return flags[..., 2] & ~flags[..., 0] & ~flags[..., 1]
+
+
 def slide_outcomes(vertices, closed, edge, load, friction, compliant=True):
     """Where a loading contact on ``edge`` ends (Sec. V-A2 motion model), vectorized over N.
 
