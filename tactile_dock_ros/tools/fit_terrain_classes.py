@@ -85,9 +85,9 @@ def holding_check(
     friction angle: its draws hold on 6.28 edges per shape against the held-out truths' 4.77
     (1.32x), and nowhere 0.35 % of the time against 1.45 %; sloper and notch within 2 %.
     ``--variance-kept 0.99999 --floor-mm 0.05`` gives 4.80 (1.01x) but is not the default: on
-    its three_ledges prior the HMC sampler's 40-seed means lie 0.27-0.37 posterior std from
-    rejection's (pooled, tolerance 0.2; the shipped prior on the same histories 0.06), which a
-    4x longer burn-in removes at 10x the sampling time (docs/perception.md)."""
+    its three_ledges prior the HMC sampler's 40-seed means lie 0.29-0.37 posterior std from
+    rejection's (pooled, tolerance 0.2; the shipped prior on the same histories 0.06); the
+    posterior there has two modes and HMC under-weights one (docs/perception.md)."""
     out = {}
     for index, terrain in enumerate(library.classes):
         problem = problems.get(terrain.name)
