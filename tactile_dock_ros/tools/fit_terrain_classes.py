@@ -74,7 +74,8 @@ def training_truths(name: str, per_class: int, seed: int, stream: int = SUB_STRE
 def holding_check(
     library: TerrainLibrary, seed: int, truths: int = HOLD_TRUTHS, draws: int = HOLD_DRAWS
 ) -> dict[str, dict[str, float]]:
-    """Per class: how many edges hold the problem's load (``core.simulate.holding_edges``) in
+    """Per class (named after a ``core.problems`` problem, as this tool fits them; another name
+    raises ValueError): how many edges hold the problem's load (``core.simulate.holding_edges``) in
     the mean class draw and in the mean held-out train truth (sub-stream ``HOLD_STREAM``), and
     how often none does. The planner's predictions rest on these frequencies, so a class whose
     draws hold more often than the shapes it describes predicts docks that do not come.
