@@ -222,10 +222,9 @@ def test_the_inlier_fraction_leaves_out_bins_at_a_depth_step():
 
 
 def test_the_hold_check_flags_a_class_whose_floor_makes_holds():
-    """The check compares a class's holding edges with held-out truths': the 0.71 mm floor that
-    0.1 % of three_ledges' dropped variance makes tilts its ledge tops into holds the truths do
-    not have (1.3x); keeping 99.999 % with a 0.05 mm floor does not. Sloper's and notch's
-    shipped classes hold as their truths do."""
+    """A class's draws must hold the load on as many edges as the shapes it describes: the
+    0.71 mm floor that 0.1 % of three_ledges' dropped variance makes tilts its ledge tops into
+    holds the truths do not have (1.3x); the default fit does not, nor does the shipped library."""
     truths = fit_terrain_classes.training_truths("three_ledges", 400, 0)
 
     def ratio(library: TerrainLibrary) -> dict[str, float]:
@@ -234,8 +233,7 @@ def test_the_hold_check_flags_a_class_whose_floor_makes_holds():
 
     wide = fit_class("three_ledges", truths, variance_kept=0.999, floor_m=0.0003)
     assert ratio(TerrainLibrary((wide,)))["three_ledges"] > 1.2
-    tight = fit_class("three_ledges", truths, variance_kept=0.99999, floor_m=0.00005)
-    assert ratio(TerrainLibrary((tight,)))["three_ledges"] < 1.05
+    assert ratio(TerrainLibrary((fit_class("three_ledges", truths),)))["three_ledges"] < 1.05
     shipped = ratio(TerrainLibrary.load(SHIPPED))
     assert set(shipped) == set(problems.names())
-    assert 0.95 < shipped["sloper"] < 1.05 and 0.95 < shipped["notch"] < 1.05, shipped
+    assert all(0.95 < r < 1.05 for r in shipped.values()), shipped

@@ -201,7 +201,9 @@ def test_benchmark_histories_are_consistent_with_their_truths():
     assert history_consistent(False, truth[None], history, problem.friction)[0]
 
 
-def test_warm_start_from_the_previous_posterior(sloper_case):
+def test_warm_start_from_the_previous_posterior(sloper_case, monkeypatch):
+    """Warm rows seed the chains that exact prior draws do not (none here: on this short
+    history the exact seeds would fill every chain, ``test_exact_seeds_*`` cover them)."""
     problem, history = sloper_case
     shape = problem.prior
     # ~20 % of the one-probe posterior survives the second probe (19-33 of 120 draws over 12
@@ -209,6 +211,7 @@ def test_warm_start_from_the_previous_posterior(sloper_case):
     before = sample_posterior(shape, history.subset([0, 1]), 240, np.random.default_rng(4))
     consistent = history_consistent(False, before.vertices, history, problem.friction)
     assert consistent.sum() >= 16
+    monkeypatch.setattr(sampling, "_exact_seeds", _no_exact_seeds)
     warm = sample_posterior(shape, history, 60, np.random.default_rng(6), init_z=before.z)
     assert warm.info["warm_seeds"] == 16 and warm.info["burn_in"] == 1
     assert history_consistent(False, warm.vertices, history, problem.friction).all()
@@ -476,7 +479,7 @@ def _learned_case(problem: str, instance: int, cycle: int, max_draws: int):
 @pytest.fixture(scope="module")
 def learned_notch_reference():
     """Notch truth 11: 0.27 degrees from holding, so its first attempt fails whatever the
-    sampler draws and cycle 1 has a history (9 rows, ~7 % of prior draws fit, 2026-11-29)."""
+    sampler draws and cycle 1 has a history (11 rows, ~7 % of prior draws fit, 2026-11-29)."""
     return _learned_case("notch", 11, 1, 2 * 10**6)
 
 
@@ -495,10 +498,10 @@ def test_learned_prior_means_match_rejection(learned_notch_reference, monkeypatc
 def test_learned_prior_means_match_rejection_over_40_seeds(problem, instance, each_tol, pooled_tol):
     """40 seeds per case: every run complete with no trapped chain and within ``each_tol`` of
     rejection, and the 40 runs pooled (80,000 draws: what stays is bias) within ``pooled_tol``.
-    Measured 2026-11-29: notch each <= 0.075, pooled 0.019; three_ledges truth 23 (0.10
-    degrees from holding; its compliant first attempt slides off: 6 rows, ~0.25 % of prior
-    draws fit them) each <= 0.243, pooled 0.076 (median coordinate 0.048: a small bias, see
-    docs/inference.md). A run whose chains stayed in a pocket was 4.6 off (problem 2)."""
+    Measured 2026-11-29: notch each <= 0.102, pooled 0.037; three_ledges truth 23 (0.10
+    degrees from holding; its compliant first attempt slides off: 4 rows, ~0.36 % of prior
+    draws fit them, a posterior with two modes) each <= 0.221, pooled 0.054 (median coordinate
+    0.034; see docs/inference.md). A run whose chains stayed in a pocket was 4.6 off (problem 2)."""
     shape_problem, history, mean, std = _learned_case(problem, instance, 1, 10**7)
     means = []
     for seed in range(40):
@@ -659,6 +662,30 @@ def test_exact_seeds_come_before_warm_rows_that_sit_in_one_region(problem2_refer
         stuck = run()
     assert stuck.info["exact_seeds"] == 0 and stuck.info["warm_seeds"] == 16
     assert _mean_error(stuck, mean, std) > 1.0
+
+
+@pytest.mark.parametrize("rows", [1, 4, 40, 136, 400])
+def test_the_exact_seed_search_draws_more_on_a_shorter_history(rows, monkeypatch):
+    """The search costs what 128 draws, then 32 per chain, cost on a 136-row history (the test
+    is linear in the rows): a 4-row history tries 4352 prior draws before giving up, then up to
+    1088 per chain; 136 rows and more keep 128 and 32."""
+    shape = problems.get("sloper").prior
+    history = History().extend(
+        np.zeros((rows, 2)), np.tile([1.0, 0.0], (rows, 1)), np.zeros(rows, dtype=int)
+    )
+    first = max(128, 128 * 136 // rows)
+    monkeypatch.setattr(sampling, "feasible", lambda system, z: np.zeros(len(z), dtype=bool))
+    none, spent = sampling._exact_seeds(shape, history, None, 16, np.random.default_rng(0))
+    assert len(none) == 0 and spent == first  # no hit in the first batch: stop
+    hits = iter([True] + [False] * 10**6)  # one hit in the first batch: spend the budget
+    monkeypatch.setattr(
+        sampling, "feasible", lambda system, z: np.array([next(hits) for _ in z], dtype=bool)
+    )
+    monkeypatch.setattr(
+        sampling, "_consistent_rows", lambda shape, history, z: np.ones(len(z), bool)
+    )
+    one, spent = sampling._exact_seeds(shape, history, None, 16, np.random.default_rng(0))
+    assert len(one) == 1 and spent == max(first, max(32, 32 * 136 // rows) * 16)
 
 
 def test_exact_seeds_short_of_the_chains_are_topped_up_with_warm_rows(problem2_reference):

