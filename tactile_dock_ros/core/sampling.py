@@ -657,7 +657,7 @@ def _exact_seeds(shape, history, system, chains, rng):
     learned three_ledges prior fitted with a 0.05 mm floor, whose cycle-1 posterior has two
     modes (21 % in the smaller) and 0.36 % of prior draws fit, the first batch of 128 found no
     hit in 63 % of runs and 40 runs of 2000 draws pooled lay 0.21-0.31 posterior std from
-    rejection (single runs 0.79); with every chain seeded exactly, 0.02 (single runs 0.175)."""
+    rejection (single runs 0.79); with these counts 0.054 (single runs 0.22)."""
     found, count, spent = [np.zeros((0, shape.n_basis))], 0, 0
     scale = max(1.0, SEED_COST_ROWS / max(len(history), 1))
     first = int(SEED_PRIOR_BATCH * scale)
@@ -964,7 +964,7 @@ def _mass_allocation(draws, low, high, exact) -> tuple[np.ndarray, np.ndarray]:
     holding ~20 % of the posterior scored 1.5-1.8 nats less (shares 14-18 %), 19-40 of 125
     chains, and all were moved out. 40 seeds of 2000 draws against rejection (pooled means,
     largest and median coordinate, in posterior std): that prior 0.31 / 0.25 -> 0.21 / 0.15;
-    the shipped library's three_ledges case of ``test_sampling`` 0.10 / 0.075 -> 0.076 / 0.048
+    the library before's three_ledges case of ``test_sampling`` 0.10 / 0.075 -> 0.076 / 0.048
     (largest single run 0.255 -> 0.243); notch and problem 2's checks unchanged."""
     score = chain_log_mass(draws)
     total = low.size + high.size

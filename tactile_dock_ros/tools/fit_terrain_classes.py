@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import problems, simulate
+from ..core.shape import GaussianShape
 from ..perception.config import PerceptionConfig, PerceptionError
 from ..perception.learned_prior import (
     FLOOR_M,
@@ -92,8 +93,8 @@ def holding_check(
         problem = problems.get(terrain.name)
         held_out = training_truths(terrain.name, truths, seed, HOLD_STREAM)
         rng = np.random.default_rng([*split_seed("train", seed), HOLD_STREAM, index, draws])
-        z = rng.standard_normal((draws, terrain.basis.shape[1]))
-        sampled = terrain.mean + (z @ terrain.basis.T).reshape(draws, -1, 2)
+        shape = GaussianShape(terrain.mean.ravel(), terrain.basis, terrain.closed, terrain.friction)
+        sampled = shape.vertices(shape.sample_z(rng, draws))
         row = {}
         for label, shapes in (("class", sampled), ("truths", held_out)):
             holds = simulate.holding_edges(shapes, terrain.closed, problem.load, terrain.friction)
