@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from test_slides import LOAD, MU, level_edge, slide_probes, slope_shape
 
-from tactile_dock_ros.core import episode_posterior, sampling, slides
+from tactile_dock_ros.core import episode_posterior, planner, sampling, slides
 from tactile_dock_ros.core.constraints import observation_violations
 from tactile_dock_ros.core.episode import EpisodeState
 from tactile_dock_ros.core.shape import GaussianShape
@@ -116,3 +116,78 @@ def test_a_bad_top_up_budget_is_refused(bad):
             PRIOR, EpisodeState(HISTORY, MOVES), 10, np.random.default_rng(0), LOAD,
             top_up_draws=bad,
         )  # fmt: skip
+
+
+RARE = GaussianShape(  # 40 degrees, 1.6 mm per coordinate: an edge rarely holds
+    slope_shape(8, 40.0).ravel(), 0.0016 * np.eye(16), closed=False, friction=MU
+)
+ONE_SLIP = slide_probes(slope_shape(8, 40.0), [5])
+
+
+def edge_holds(vertices) -> float:
+    """Edges holding the load, summed over ``vertices`` (N, n, 2)."""
+    q_edge, _ = planner.holding_frequencies(vertices, False, LOAD, MU)
+    return float(q_edge.sum() * len(vertices))
+
+
+def test_a_cycle_where_no_edge_holds_draws_on_to_the_give_up_count():
+    """Under ``RARE`` after one slip an edge holds in 0.23 % of exact draws (40,000 rejection
+    draws), so 100 draws hold nowhere 79 % of the time. Such a cycle draws on to
+    ``hold_draws`` (3000: the planner's give-up at 0.001 then reads "no hold in 3000") and
+    returns them all; one with a hold returns its 100. Over 12 seeds 5-10 drew on, and their
+    extra draws held 0.86-1.17 times as often as rejection's (4 sets of 12, measured
+    2026-11-29): the top-up's draws are the posterior's, not a search for a hold."""
+    state = EpisodeState(ONE_SLIP)
+    ref = sampling.sample_posterior(RARE, ONE_SLIP, 40_000, np.random.default_rng(0), "rejection")
+    rate = edge_holds(ref.vertices) / len(ref.vertices)
+    held = drawn = topped_up = 0
+    for seed in range(12):
+        post = episode_posterior.draw(RARE, state, 100, np.random.default_rng(seed), LOAD,
+                                      hold_draws=3000)  # fmt: skip
+        assert not np.any(observation_violations(False, post.vertices, ONE_SLIP, MU) > 0)
+        first = post.vertices[:100]
+        if post.info["hold_draws"] == 0:
+            assert len(post.z) == 100 and planner.edge_holds_anywhere(first, RARE, LOAD)
+            continue
+        assert len(post.z) == 3000 and post.info["hold_draws"] == 2900
+        assert post.info["slide_draws"] - post.info["slide_rejected"] == 3000
+        assert not planner.edge_holds_anywhere(first, RARE, LOAD)
+        topped_up += 1
+        held, drawn = held + edge_holds(post.vertices[100:]), drawn + 2900
+    assert topped_up >= 2  # each seed 79 %: fewer than 2 of 12 has probability ~1e-7
+    assert 0.5 < held / (drawn * rate) < 1.6, (held, drawn * rate)
+
+
+def test_the_hold_top_up_draws_fewer_on_a_longer_history(monkeypatch):
+    """Its draws times the history's rows stay within ``HOLD_ROW_DRAWS``: a cycle's cost grows
+    with both."""
+    two_rows = slide_probes(slope_shape(8, 40.0), [5, 3])
+    monkeypatch.setattr(episode_posterior, "HOLD_ROW_DRAWS", 3000)
+    sizes = []
+    for seed in range(12):  # each draws on with probability ~0.8 (see above)
+        rng = np.random.default_rng(seed)
+        post = episode_posterior.draw(RARE, EpisodeState(two_rows), 100, rng, LOAD, hold_draws=3000)
+        sizes.append(len(post.z) if post.info["hold_draws"] else None)
+    assert 1500 in sizes and set(sizes) <= {1500, None}, sizes
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_no_top_up_for_a_hold_before_any_contact_or_when_off(seed):
+    """Before any contact the planner counts the prior's own draws (``first_cycle_draws``); a
+    cycle where an edge holds, or ``hold_draws`` 0, returns what it asked for."""
+    for shape, state, draws in [
+        (RARE, EpisodeState(), 3000),  # no contact yet: the planner's prior draws
+        (RARE, EpisodeState(ONE_SLIP), 0),  # off
+        (PRIOR, EpisodeState(HISTORY), 3000),  # 35 degrees, 4 mm: edges hold in most draws
+    ]:
+        post = episode_posterior.draw(shape, state, 100, np.random.default_rng(seed), LOAD,
+                                      hold_draws=draws)  # fmt: skip
+        assert len(post.z) == 100 and post.info["hold_draws"] == 0
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5])
+def test_a_bad_hold_budget_is_refused(bad):
+    with pytest.raises(ValueError, match="hold_draws"):
+        episode_posterior.draw(
+            PRIOR, EpisodeState(HISTORY), 10, np.random.default_rng(0), LOAD, hold_draws=bad
+        )

@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
-from tactile_dock_ros.core import constraints, explore, problems, sampling, simulate, slides
+from tactile_dock_ros.core import (
+    constraints,
+    episode_posterior,
+    explore,
+    problems,
+    sampling,
+    simulate,
+    slides,
+)
 from tactile_dock_ros.core.episode import EpisodeState, PlannerConfig
 from tactile_dock_ros.core.history import History, Status
 from tactile_dock_ros.perception.config import PerceptionConfig
@@ -151,6 +159,25 @@ def test_a_non_compliant_slip_slides_on_as_evidence_with_slide_on_slip():
     assert np.count_nonzero(slips) >= 3
     groups = slides.slide_groups(rows[1], np.ones(len(rows[1]), int))
     assert len(groups) == 1 and len(groups[0]) == np.count_nonzero(slips)
+
+
+def test_the_loop_draws_what_its_give_up_threshold_needs(monkeypatch):
+    """With no edge holding in a later cycle's samples the loop's draws go on to the give-up's
+    count (``episode_posterior.draw``'s ``hold_draws``, ``planner.give_up_draws``)."""
+    asked = []
+    real = episode_posterior.draw
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs["hold_draws"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(episode_posterior, "draw", spy)
+    problem, truth = _truth("sloper", False)
+    for threshold in (1e-3, 1e-2):
+        explore.run_episode(
+            problem, truth, "ours", np.random.default_rng(2), 2, give_up_threshold=threshold
+        )
+    assert set(asked) == {3000, 300} and len(asked) >= 2
 
 
 def test_same_seed_same_episode():

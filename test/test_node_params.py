@@ -7,6 +7,8 @@ import yaml
 from conftest import REPO_ROOT
 from node_helpers import launch_nodes, node_from_launch
 
+from tactile_dock_ros.core import planner
+
 
 def _cases():
     for profile in ("mock", "robot"):
@@ -110,6 +112,20 @@ def test_inference_conditions_slides_on_the_planners_load(profile):
     config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
     load = config["planner"]["ros__parameters"]["load_direction"]
     assert config["inference"]["ros__parameters"]["load_direction"] == load
+
+
+@pytest.mark.parametrize("profile", ["mock", "robot"])
+def test_inference_draws_what_the_planners_give_up_needs(profile):
+    """With no sample holding, inference draws on to ``give_up_draws``: the profiles give it the
+    count the planner's threshold asks for (``planner.give_up_draws``)."""
+    config = yaml.safe_load((REPO_ROOT / "config" / f"{profile}.yaml").read_text())
+    threshold = config["planner"]["ros__parameters"]["give_up_threshold"]
+    draws = config["inference"]["ros__parameters"]["give_up_draws"]
+    assert (
+        draws
+        == planner.give_up_draws(threshold)
+        > config["inference"]["ros__parameters"]["num_samples"]
+    )
 
 
 @pytest.mark.parametrize("profile", ["mock", "robot"])

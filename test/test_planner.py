@@ -412,6 +412,8 @@ def test_prior_draws_only_before_any_observation_and_up_to_the_rule_of_three():
     assert len(planner.first_cycle_draws(shape, empty, 100, 0.05)) == 0  # 60 < 100
     seen = EpisodeState().record(History([[0.0, 2.0]], [[0.0, 1.5]], [Status.FREE]), 1)
     assert len(planner.first_cycle_draws(shape, seen, 100, 1e-3)) == 0
+    draws = [planner.give_up_draws(t) for t in (1e-3, 1e-2, 0.05, 7e-3, 1e-4, 0.0)]
+    assert draws == [3000, 300, 60, 429, planner.PRIOR_DRAWS_MAX, planner.PRIOR_DRAWS_MAX]
 
 
 def test_a_plan_above_the_threshold_uses_only_its_samples(monkeypatch):

@@ -187,3 +187,18 @@ def test_planner_drops_the_samples_a_slide_rules_out():
     assert plan.rejected == 0 and plan.decision == "dock"  # a dropped row takes no part
     pair = planner.plan(np.stack([slope, flat]), prior, informed, config)
     assert pair.rejected == 1 and pair.decision == "dock"  # fewer than two pass: all kept
+
+
+def test_samples_are_checked_in_blocks_with_the_same_answer(monkeypatch):
+    """The crossing test runs over blocks of samples (``CROSSING_BLOCK``); a block of one
+    sample each gives every sample's answer as one block for all does."""
+    slope = slope_shape(8, 35.0)
+    rng = np.random.default_rng(4)
+    samples = slope + rng.normal(0.0, 0.004, (60, *slope.shape))
+    samples[::3] = level_edge(slope, 3)  # a level edge on the slide's way: fails
+    history = slide_probes(slope, [5, 1])
+    whole = slides.consistent_with_slides(samples, False, history, [4, 4], LOAD, MU)
+    assert 0 < whole.sum() < len(whole) - 20  # both answers, the level-edge ones fail
+    monkeypatch.setattr(slides, "CROSSING_BLOCK", 1)
+    one_each = slides.consistent_with_slides(samples, False, history, [4, 4], LOAD, MU)
+    np.testing.assert_array_equal(one_each, whole)

@@ -103,7 +103,8 @@ def run_episode(
     seed gives the same episode. The loop holds an ``episode.EpisodeState``: posterior chains
     are warm-started from the previous cycle's samples and each history row records its cycle
     (from 1), so the planner gets only samples on which every recorded compliant slide could
-    have happened, topped up when the slides rule out most draws (``episode_posterior.draw``).
+    have happened, topped up when the slides rule out most draws and, when no sample holds the
+    load anywhere, to the draws a give-up needs (``episode_posterior.draw``).
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
@@ -139,6 +140,7 @@ def run_episode(
                 config.load,
                 method=method,
                 threads=sampler_threads,
+                hold_draws=planner.give_up_draws(give_up_threshold),
             )
             t1 = time.perf_counter()
             if len(post.vertices) < 2:

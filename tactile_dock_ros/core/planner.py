@@ -28,8 +28,10 @@ samples is checked on the prior draws too. Only would-be give-ups pay; every oth
 one of the N samples (measured, ``bench holds``: recounting every first cycle over 3000 draws
 put ``/evaluate_hold``'s p99 at 446-488 ms, would-be give-ups only at 91-93 ms; target 200 ms).
 The draws come from a generator of fixed seed (``PRIOR_DRAWS_SEED``), so a replay of the
-journaled samples plans the same. Later cycles keep the 1/N resolution: their posterior has no
-cheap exact draws.
+journaled samples plans the same. Later cycles' posteriors have no cheap exact draws: there the
+sampler draws on when no sample lets an edge hold (``episode_posterior.draw``'s ``hold_draws``,
+``give_up_draws`` of the threshold; the inference node's ``give_up_draws``) and the planner
+plans on all the draws it gets.
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are
@@ -56,7 +58,7 @@ from .freespace import FreeSpace, likely_obstacle_region
 from .history import History, Status
 from .shape import GaussianShape
 
-PRIOR_DRAWS_MAX = 3000  # a first-cycle give-up's samples + prior draws, at most this many
+PRIOR_DRAWS_MAX = 3000  # a give-up's draws at most (``give_up_draws``)
 PRIOR_DRAWS_SEED = 0  # the first cycle's prior draws: fixed, so a replay plans the same
 # An edge faces the load when the push has at least this component against its outward normal.
 _MIN_FACING = 0.05
@@ -284,16 +286,31 @@ def holding_frequencies(
     return q_edge, q_vertex
 
 
+def give_up_draws(threshold: float) -> int:
+    """Draws in which no hold bounds P(hold) below ``threshold`` at 95 % (the rule of three):
+    ``ceil(3 / threshold)``, at most ``PRIOR_DRAWS_MAX`` (also for a threshold of 0)."""
+    if threshold <= 0:
+        return PRIOR_DRAWS_MAX
+    return min(PRIOR_DRAWS_MAX, int(np.ceil(3 / threshold)))
+
+
+def edge_holds_anywhere(samples: np.ndarray, shape: GaussianShape, load) -> bool:
+    """Whether any of ``samples`` (N, n, 2) lets an edge of ``shape`` hold ``load``
+    (``holding_frequencies``). If none does, a non-compliant move docks nowhere: a vertex
+    only traps a slide, which only compliant moves make."""
+    q_edge, _ = holding_frequencies(
+        samples, shape.closed, load, shape.friction, shape.closure_edges
+    )
+    return bool(q_edge.any())
+
+
 def first_cycle_draws(
     shape: GaussianShape, state: EpisodeState, n_samples: int, threshold: float
 ) -> np.ndarray:
     """Prior draws (M, n, 2) that a would-be give-up also counts (module docstring): before any
     observation (empty history: the posterior is ``shape``), ``ceil(3 / threshold)`` (at most
     ``PRIOR_DRAWS_MAX``) minus the ``n_samples`` the planner has; none (M = 0) otherwise."""
-    wanted = (
-        PRIOR_DRAWS_MAX if threshold <= 0 else min(PRIOR_DRAWS_MAX, int(np.ceil(3 / threshold)))
-    )
-    extra = 0 if len(state.history) else max(0, wanted - n_samples)
+    extra = 0 if len(state.history) else max(0, give_up_draws(threshold) - n_samples)
     rng = np.random.default_rng(PRIOR_DRAWS_SEED)
     return shape.vertices(shape.sample_z(rng, extra))
 

@@ -10,8 +10,9 @@ previous posterior, the sampler's warm start), publishes it latched on ``contact
 episode id came) and, after every change while an episode runs, samples the posterior with
 ``core.episode_posterior.draw`` (up to ``num_samples`` draws on which every recorded compliant
 slide could have happened under ``load_direction``, the planner's in both profiles; topped up
-when the slides rule out most) and publishes ``shape_samples`` (latched) and RViz markers on
-``~/markers``.
+when the slides rule out most, and to ``give_up_draws`` when none lets an edge hold the load, so
+that the planner's give-up reads "no hold in 3 / give_up_threshold draws") and publishes
+``shape_samples`` (latched) and RViz markers on ``~/markers``.
 
 Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.ReceivedPriors``, the
 last ``max_holds``, as the planner keeps them); the episode samples on the hold its
@@ -88,6 +89,16 @@ PARAMS = [
         choices=NODE_METHODS,
     ),
     Param("num_samples", 100, "posterior samples per cycle", "", 2, 100000),
+    Param(
+        "give_up_draws",
+        3000,
+        "when no sample lets an edge hold the load after a contact, draw on to this many in all, "
+        f"at most {episode_posterior.HOLD_ROW_DRAWS} / history rows (3 / the planner's "
+        "give_up_threshold: none holding in that many bounds P(hold) below it at 95 %); 0: off",
+        "",
+        0,
+        100000,
+    ),
     LOAD_DIRECTION,
     Param("seed", 0, "seed of the sampler's random generator", "", 0, 2**31 - 1),
     Param(
@@ -355,6 +366,7 @@ class InferenceNode(Node):
                 self.load,
                 method=self.p.method,
                 threads=self.p.sampler_threads,
+                hold_draws=self.p.give_up_draws,
             )
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")

@@ -339,8 +339,9 @@ def main(argv: list[str] | None = None) -> int:
             cold = replace(cycle.state, dropped=(), warm_start=None, deferral=None)
             load = cycle.recorded.load
             fresh = episode_posterior.draw(
-                cycle.prior, cold, args.resample, rng, load, method=args.method
-            )
+                cycle.prior, cold, args.resample, rng, load, method=args.method,
+                hold_draws=planner.give_up_draws(settings.config.give_up_threshold),
+            )  # fmt: skip
         plans.append(replan(cycle, settings, fresh))
         rows.append(compare(cycle, plans[-1]))
         print(_format(rows[-1]))
