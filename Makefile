@@ -100,7 +100,10 @@ $(STAMPS)/venv: $(REQUIREMENTS) | $(STAMPS)/python
 # The messages are built with the very same CMake project `colcon build` uses, installed into
 # the venv prefix. The hand-written Python package is NOT copied in for this developer build
 # (TACTILE_DOCK_INSTALL_PYTHON=OFF): it is imported from the work tree, so edits need no reinstall.
-$(STAMPS)/msgs: $(STAMPS)/venv CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv action/*.action)
+# The share files (launch, config, security, node scripts) are installed too: a change to any of
+# them reinstalls, so launch files and tools that look them up never run a stale copy.
+SHARE_FILES = $(wildcard launch/* config/* security/* scripts/*)
+$(STAMPS)/msgs: $(STAMPS)/venv CMakeLists.txt package.xml $(wildcard msg/*.msg srv/*.srv action/*.action) $(SHARE_FILES)
 	@mkdir -p $(BUILD)
 	PATH="$(abspath $(VENV))/bin:$$PATH" cmake -S . -B $(BUILD) -Wno-dev \
 	  -DCMAKE_PREFIX_PATH="$(abspath $(VENV))" -DCMAKE_INSTALL_PREFIX="$(abspath $(VENV))" \
