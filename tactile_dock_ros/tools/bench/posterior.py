@@ -192,15 +192,22 @@ def _plan_docks(view: explore.CycleView, shape, samples: np.ndarray) -> float | 
     return float(docks.mean())
 
 
+def _planned_count(view: explore.CycleView, n_samples: int) -> int:
+    """The cycle's sample count as the loop asked for it: ``n_samples``, fewer when the slides
+    left fewer (a give-up's draw-on returns more, up to 3000: ``episode_posterior.draw``)."""
+    return min(len(view.samples), n_samples)
+
+
 def _repeats(
-    view: explore.CycleView, shape, warm_start, runs: int, method: str, rng
+    view: explore.CycleView, shape, warm_start, runs: int, method: str, rng, n_samples: int = 100
 ) -> list[sampling.PosteriorSamples]:
-    """``runs`` more ``method`` runs of the cycle's history, from ``warm_start`` (the previous
-    cycle's samples as ``explore`` uses them; None: the sampler's seeding)."""
+    """``runs`` more ``method`` runs of the cycle's history (``_planned_count`` draws each), from
+    ``warm_start`` (the previous cycle's samples as ``explore`` uses them; None: the sampler's
+    seeding)."""
     state = view.state
     return [
         sampling.sample_posterior(
-            shape, state.history, len(view.samples), rng, method, init_z=warm_start,
+            shape, state.history, _planned_count(view, n_samples), rng, method, init_z=warm_start,
             known_dropped=state.ignored,  # the rows the cycle's posterior left out
         )
         for _ in range(runs)
@@ -262,13 +269,15 @@ def compare(
     rng,
     repeats=(),
     rejection_draws: int | None = None,
+    n_samples: int = 100,
 ) -> dict:
     """One cycle: its HMC samples against ``runs`` reference runs of the same (kept) history,
     pooled; how far the runs' means lie apart says how far the reference itself can be
     trusted (at late depth-prior cycles two 1000-particle SMC runs differed by up to 0.7 std
     in a vertex mean: far more than independent draws would). The runs are SMC, or with
     ``rejection_draws`` ``rejection_reference`` runs (raises TooFewAccepted). ``repeats``:
-    more sampler runs (``_repeats``), scored alone and pooled."""
+    more sampler runs (``_repeats``), scored alone and pooled. The iid floor and the reference
+    plans use sets of the cycle's sample count (``_planned_count``)."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.ignored)
     start = time.perf_counter()
@@ -283,7 +292,7 @@ def compare(
     seconds = time.perf_counter() - start
     each = [shape.vertices(r.z) for r in refs]
     ref_v = np.concatenate(each)
-    n = len(view.samples)
+    n = _planned_count(view, n_samples)
     floor = _mean_errors(ref_v[:n], ref_v[n:])
     apart = max(
         float(_mean_errors(each[i], each[j]).max()) for i in range(runs) for j in range(i + 1, runs)
@@ -402,12 +411,20 @@ def run(args) -> dict:
         warm = views[cycle - 1].state.warm_start if cycle and args.sampler_start == "warm" else None
         repeat_rng = np.random.default_rng([args.seed, cycle, 8])  # references: the same without
         repeats = _repeats(
-            views[cycle], shape, warm, args.sampler_runs, args.sampler_method, repeat_rng
-        )
+            views[cycle], shape, warm, args.sampler_runs, args.sampler_method, repeat_rng,
+            args.samples,
+        )  # fmt: skip
         try:
             rows.append(
                 compare(
-                    views[cycle], shape, particles, args.references, rng, repeats, rejection_draws
+                    views[cycle],
+                    shape,
+                    particles,
+                    args.references,
+                    rng,
+                    repeats,
+                    rejection_draws,
+                    args.samples,
                 )
             )
         except TooFewAccepted as err:
