@@ -998,6 +998,39 @@ def test_a_row_the_seed_search_fits_late_is_deferred_never_dropped_early():
     assert history_consistent(False, out.vertices, kept, prior.friction).all()
 
 
+def test_a_round_whose_descents_fail_seeds_the_chains_from_its_warm_rows(sloper_case, monkeypatch):
+    """One warm row fits the history, fewer than SEED_MIN_DISTINCT, and no exact seed: descents
+    look for more. A round whose restart reaches no feasible state ends there, the warm row
+    seeding every chain; the one-call search still runs all its restarts first."""
+    problem, history = sloper_case
+    warm = sample_posterior(problem.prior, history, 30, np.random.default_rng(0)).z[:1]
+
+    def no_exact(shape, history, system, chains, rng):
+        return np.zeros((0, shape.n_basis)), 0
+
+    monkeypatch.setattr(sampling, "_exact_seeds", no_exact)
+    real = sampling.random_descent
+
+    def failing(system, z0, rng, *args):
+        z, count = real(system, z0, rng, *args)
+        return z, np.maximum(count, 1)  # no descent reaches a feasible state
+
+    monkeypatch.setattr(sampling, "random_descent", failing)
+    rounds = sampling.SEED_ROUND_RESTARTS
+    out = sample_posterior(
+        problem.prior,
+        history,
+        30,
+        np.random.default_rng(1),
+        init_z=warm,
+        seed_round_restarts=rounds,
+    )
+    assert out.info["seed_restarts"] == rounds and len(out.z) == 30
+    assert history_consistent(False, out.vertices, history, problem.friction).all()
+    one_call = sample_posterior(problem.prior, history, 30, np.random.default_rng(1), init_z=warm)
+    assert one_call.info["seed_restarts"] == sampling.SEED_RESTARTS_DEFAULT
+
+
 def test_an_inconsistent_row_is_dropped_after_the_one_call_searchs_effort(sloper_case):
     """A free move through a felt contact: calls 1-7 defer it (one failed restart each), the
     8th drops it, as the one-call search of 8 restarts did at once."""
