@@ -208,3 +208,36 @@ def test_the_node_publishes_samples_on_which_the_slides_could_happen(tmp_path):
     vertices = convert.samples_from_msg(samples[-1])
     assert 35 <= len(vertices) <= 100
     assert slides.consistent_with_slides(vertices, False, HISTORY, [1, 1], LOAD, MU).all()
+
+
+@pytest.mark.parametrize("draws", [3000, 0])
+def test_with_no_edge_holding_the_node_draws_on_to_give_up_draws(tmp_path, draws):
+    """A 60-degree slope with 1.6 mm of noise per coordinate never holds the load (the friction
+    angle is 26.6 degrees): after a contact the node draws on to ``give_up_draws`` and publishes
+    them all, so the planner's give-up reads "no hold in 3000"; 0 turns that off."""
+    from test_episode_posterior import LOAD, MU
+    from test_slides import slide_probes, slope_shape
+
+    from tactile_dock_ros.core import planner
+    from tactile_dock_ros.core.shape import GaussianShape
+
+    steep = slope_shape(8, 60.0)
+    prior = GaussianShape(steep.ravel(), 0.0016 * np.eye(16), closed=False, friction=MU)
+    slip = slide_probes(steep, [5])
+    spec = launch_nodes("mock")["inference"]
+    args = ["-p", "inference:num_samples:=100", "-p", f"inference:give_up_draws:={draws}"]
+    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
+        assert node.p.give_up_draws == draws
+        samples = []
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        priors = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        priors.publish(convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane")))
+        episode.publish(UInt32(data=EPISODE))
+        report = Report(1, ExecutionReport.CONTACT_FAILED, slip, slip.b[-1], "", EPISODE)
+        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == 1, 30.0)
+    vertices = convert.samples_from_msg(samples[-1])
+    assert len(vertices) == max(draws, 100) and samples[-1].num_samples == len(vertices)
+    assert not planner.edge_holds_anywhere(vertices, prior, LOAD)
