@@ -145,15 +145,16 @@ def test_a_cycle_where_no_edge_holds_draws_on_to_the_give_up_count():
         post = episode_posterior.draw(RARE, state, 100, np.random.default_rng(seed), LOAD,
                                       hold_draws=3000)  # fmt: skip
         assert not np.any(observation_violations(False, post.vertices, ONE_SLIP, MU) > 0)
-        first = post.vertices[:100]
-        if post.info["hold_draws"] == 0:
-            assert len(post.z) == 100 and planner.edge_holds_anywhere(first, RARE, LOAD)
+        extra = post.info["hold_draws"]
+        first = post.vertices[: len(post.z) - extra]  # the loop's 100 (fewer if a chain failed)
+        if extra == 0:
+            assert 90 <= len(post.z) <= 100 and planner.edge_holds_anywhere(first, RARE, LOAD)
             continue
-        assert len(post.z) == 3000 and post.info["hold_draws"] == 2900
-        assert post.info["slide_draws"] - post.info["slide_rejected"] == 3000
+        assert 0.9 * 3000 <= len(post.z) <= 3000 and len(first) <= 100
+        assert post.info["slide_draws"] - post.info["slide_rejected"] == len(post.z)
         assert not planner.edge_holds_anywhere(first, RARE, LOAD)
         topped_up += 1
-        held, drawn = held + edge_holds(post.vertices[100:]), drawn + 2900
+        held, drawn = held + edge_holds(post.vertices[len(first) :]), drawn + extra
     assert topped_up >= 2  # each seed 79 %: fewer than 2 of 12 has probability ~1e-7
     assert 0.5 < held / (drawn * rate) < 1.6, (held, drawn * rate)
 
@@ -168,7 +169,8 @@ def test_the_hold_top_up_draws_fewer_on_a_longer_history(monkeypatch):
         rng = np.random.default_rng(seed)
         post = episode_posterior.draw(RARE, EpisodeState(two_rows), 100, rng, LOAD, hold_draws=3000)
         sizes.append(len(post.z) if post.info["hold_draws"] else None)
-    assert 1500 in sizes and set(sizes) <= {1500, None}, sizes
+    drew_on = [n for n in sizes if n is not None]
+    assert drew_on and all(0.9 * 1500 <= n <= 1500 for n in drew_on), sizes
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -182,7 +184,7 @@ def test_no_top_up_for_a_hold_before_any_contact_or_when_off(seed):
     ]:
         post = episode_posterior.draw(shape, state, 100, np.random.default_rng(seed), LOAD,
                                       hold_draws=draws)  # fmt: skip
-        assert len(post.z) == 100 and post.info["hold_draws"] == 0
+        assert 90 <= len(post.z) <= 100 and post.info["hold_draws"] == 0
 
 
 @pytest.mark.parametrize("bad", [-1, 1.5])
