@@ -182,6 +182,26 @@ def test_the_node_compiles_the_sampler_kernels_at_start_up(tmp_path, monkeypatch
         ]
 
 
+def _samples_after_one_report(tmp_path, args, prior, history, check_node) -> ShapeSamples:
+    """What the inference node (mock profile with ``args``; ``check_node`` sees it first)
+    publishes once it has ``prior`` and one report of ``history`` (plan 1, contact failed)."""
+    spec = launch_nodes("mock")["inference"]
+    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
+        check_node(node)
+        samples = []
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        priors = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        episode, reports = _inputs(driver)
+        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
+        priors.publish(convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane")))
+        episode.publish(UInt32(data=EPISODE))
+        report = Report(1, ExecutionReport.CONTACT_FAILED, history, history.b[-1], "", EPISODE)
+        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
+        done = len(history)
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == done, 30.0)
+    return samples[-1]
+
+
 def test_the_node_publishes_samples_on_which_the_slides_could_happen(tmp_path):
     """A report of one compliant slide down a 35-degree slope whose edges may hold under the
     prior: about 72 % of the sampler's draws would contradict it (test_episode_posterior);
@@ -190,22 +210,12 @@ def test_the_node_publishes_samples_on_which_the_slides_could_happen(tmp_path):
     22-34; test_episode_posterior)."""
     from test_episode_posterior import HISTORY, LOAD, MU, PRIOR
 
-    spec = launch_nodes("mock")["inference"]
-    with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=100"]) as (
-        node, driver, executor,
-    ):  # fmt: skip
+    def uses_the_load(node):
         np.testing.assert_array_equal(node.load, LOAD)
-        samples = []
-        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
-        prior = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        episode, reports = _inputs(driver)
-        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
-        prior.publish(convert.shape_to_msg(PRIOR, convert.Header(frame_id="dock_plane")))
-        episode.publish(UInt32(data=EPISODE))
-        report = Report(1, ExecutionReport.CONTACT_FAILED, HISTORY, HISTORY.b[-1], "", EPISODE)
-        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
-        assert spin_until(executor, lambda: samples and samples[-1].history_length == 2, 30.0)
-    vertices = convert.samples_from_msg(samples[-1])
+
+    args = ["-p", "inference:num_samples:=100"]
+    msg = _samples_after_one_report(tmp_path, args, PRIOR, HISTORY, uses_the_load)
+    vertices = convert.samples_from_msg(msg)
     assert 35 <= len(vertices) <= 100
     assert slides.consistent_with_slides(vertices, False, HISTORY, [1, 1], LOAD, MU).all()
 
@@ -221,24 +231,16 @@ def test_with_no_edge_holding_the_node_draws_on_to_give_up_draws(tmp_path, draws
     from tactile_dock_ros.core import planner
     from tactile_dock_ros.core.shape import GaussianShape
 
+    def has_the_parameter(node):
+        assert node.p.give_up_draws == draws
+
     steep = slope_shape(8, 60.0)
     prior = GaussianShape(steep.ravel(), 0.0016 * np.eye(16), closed=False, friction=MU)
-    slip = slide_probes(steep, [5])
-    spec = launch_nodes("mock")["inference"]
     args = ["-p", "inference:num_samples:=100", "-p", f"inference:give_up_draws:={draws}"]
-    with node_with_driver(spec, tmp_path, args) as (node, driver, executor):
-        assert node.p.give_up_draws == draws
-        samples = []
-        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
-        priors = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
-        episode, reports = _inputs(driver)
-        assert spin_until(executor, lambda: reports.get_subscription_count() > 0, 10.0)
-        priors.publish(convert.shape_to_msg(prior, convert.Header(frame_id="dock_plane")))
-        episode.publish(UInt32(data=EPISODE))
-        report = Report(1, ExecutionReport.CONTACT_FAILED, slip, slip.b[-1], "", EPISODE)
-        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
-        assert spin_until(executor, lambda: samples and samples[-1].history_length == 1, 30.0)
-    vertices = convert.samples_from_msg(samples[-1])
+    msg = _samples_after_one_report(
+        tmp_path, args, prior, slide_probes(steep, [5]), has_the_parameter
+    )
+    vertices = convert.samples_from_msg(msg)
     wanted = max(draws, 100)  # a chain that verifies no draw is dropped: a few fewer at most
-    assert 0.9 * wanted <= len(vertices) <= wanted and samples[-1].num_samples == len(vertices)
+    assert 0.9 * wanted <= len(vertices) <= wanted and msg.num_samples == len(vertices)
     assert not planner.edge_holds_anywhere(vertices, prior, LOAD)
