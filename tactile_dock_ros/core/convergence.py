@@ -185,10 +185,11 @@ def mass_gap(z_draws: np.ndarray, group: np.ndarray, others: np.ndarray) -> floa
     group. Which group is smaller says nothing about mass when the chains were seeded by
     descent (seeds shared round-robin: one pocket seed can hold most chains; a cold run of the
     case in ``chain_log_mass`` kept the pocket that way, 5.2 std off without a warning). A gap
-    beyond MASS_GAP_LIMIT re-seeds the group with less mass, whichever is larger; anything
-    less keeps the head-count rule (a false alarm of a slowly mixing chain scores as the others
-    do: random splits of the 16 chains of five runs of that cycle with no pocket exceeded 3 in
-    0-2 %, 4 never; the pocket's split scored 7.4).
+    beyond MASS_GAP_LIMIT moves chains between the groups to their shares of the mass
+    (``sampling._mass_allocation``), whichever is larger; anything less keeps the head-count
+    rule (a false alarm of a slowly mixing chain scores as the others do: random splits of the
+    16 chains of five runs of that cycle with no pocket exceeded 3 in 0-2 %, 4 never; the
+    pocket's split scored 7.4).
     """
     score = chain_log_mass(z_draws)
     a, b = score[np.asarray(group, dtype=int)], score[np.asarray(others, dtype=int)]

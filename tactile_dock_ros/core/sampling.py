@@ -933,7 +933,8 @@ def _trapped_and_sources(draws, coords, exact):
     chose them. When the chains disagree (``trapped_chains`` names some, or split R-hat is
     above its limit), two splits are judged by ``mass_gap``: the named chains against the rest,
     and the split of the chain means at their widest gap (``chain_groups``); if the larger
-    |gap| exceeds MASS_GAP_LIMIT, the group with less mass is re-seeded from the other.
+    |gap| exceeds MASS_GAP_LIMIT, chains of the group over its share of the mass are re-seeded
+    from the other (``_mass_allocation``).
     Otherwise the named chains are re-seeded from the rest (none named: none re-seeded, the
     R-hat warning stays). Exact seeds are never re-seeded.
 
