@@ -25,8 +25,9 @@ from .history import History, Status
 SLIP = {Status.SLIP_LEFT: -1, Status.SLIP_RIGHT: 1}  # edge-index step of the slide direction
 EVIDENCE_SPACING_M = 0.04  # m between a slide's slip observations (crossed_piece_evidence)
 MIN_PIECE_SINE = 0.5  # crossed pieces closer than 30 degrees to the load give no observation
-# slide rows x samples x edges per crossing test: larger blocks run out of cache (2,992
-# three_ledges samples against 63 slide rows: 3.5 s in one block, 0.79 s in blocks of 2**20)
+# slide rows x samples x edges per crossing test. 2,992 three_ledges samples (a give-up's
+# draw-on) against 63 slide rows: peak memory 1415 MiB in one block, 97 MiB in blocks of 2**20;
+# time 0.89-0.94x alone on a core, 1.08-1.26x with another process on the other (2026-11-29)
 CROSSING_BLOCK = 2**20
 
 
