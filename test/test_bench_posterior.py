@@ -161,3 +161,26 @@ def test_a_missing_class_library_is_refused_by_name():
     argv = ["posterior", "--problem", "notch", "--prior", "learned", "--max-cycles", "1"]
     with pytest.raises(SystemExit, match="--terrain-classes"):
         bench.main([*argv, "--terrain-classes", "/nonexistent/classes.npz"])
+
+
+def test_split_test_replays_the_held_out_episode_bench_docking_ran(tmp_path):
+    """--split test --seed S: the truth and episode of bench docking's held-out figure of that
+    base seed, plan for plan (here a sloper truth on the problem prior, cap 3); the default is
+    the training truth of that index, another episode; an unknown split is refused."""
+    docking_out, replay_out, train_out = (tmp_path / f"{n}.json" for n in "drt")
+    argv = ["--problems", "sloper", "--instances", "3", "--strategies", "ours", "--prior"]
+    argv += ["problem", "--mode", "compliant", "--max-cycles", "3", "--split", "test"]
+    assert bench.main(["docking", *argv, "--seed", "3", "--json", str(docking_out)]) == 0
+    (result,) = json.loads(docking_out.read_text())["results"]
+    episode = next(e for e in result["episodes"] if e["instance"] == 2)
+    replay = ["posterior", "--problem", "sloper", "--instance", "2", "--prior", "problem"]
+    replay += ["--max-cycles", "3", "--particles", "200", "--cycles", "0"]
+    assert bench.main([*replay, "--split", "test", "--seed", "3", "--json", str(replay_out)]) == 0
+    report = json.loads(replay_out.read_text())
+    assert report["split"] == "test" and report["outcome"] == episode["outcome"]
+    assert report["p_dock"] == pytest.approx(episode["p_dock"], abs=0, rel=0)
+    assert bench.main([*replay, "--seed", "3", "--json", str(train_out)]) == 0
+    trained = json.loads(train_out.read_text())
+    assert trained["split"] == "train" and trained["p_dock"][0] != report["p_dock"][0]
+    with pytest.raises(SystemExit):
+        bench.main([*replay, "--split", "validation"])

@@ -51,15 +51,29 @@ from tactile_dock_ros.tools.bench.docking import (
     episode_seed,
     load_library,
 )
+from tactile_dock_ros.tools.bench.splits import SPLITS
 
 
 def add_replay_arguments(parser, instance: int, seed: int) -> None:
-    """The episode a suite replays (``replay_episode``): one of bench docking's training truths
-    (default ``instance``) and episode seeds (default ``seed``), prior, mode, strategy, cycle
-    cap, samples and the episode settings; shared with ``bench threads``."""
+    """The episode a suite replays (``replay_episode``): one of bench docking's truths (default
+    ``instance``; ``--split`` and ``--seed`` as bench docking draws them) and episode seeds
+    (default ``seed``), prior, mode, strategy, cycle cap, samples and the episode settings;
+    shared with ``bench threads``.
+
+    Decision: ``--split`` defaults to ``train`` here, unlike bench docking: these suites
+    diagnose and compare code on the truths it may be tuned on, and their documented runs use
+    them; ``--split test`` replays an episode of a held-out figure (one that failed, say)."""
     parser.add_argument("--problem", default="three_ledges", choices=problems.names())
     parser.add_argument(
         "--instance", type=_at_least(0), default=instance, help="truth index, as in bench docking"
+    )
+    parser.add_argument(
+        "--split",
+        choices=SPLITS,
+        default="train",
+        help="whose truths, drawn with --seed as bench docking draws them: train (the default, "
+        "the truths the code may be tuned on) or test (held out: replay an episode of a bench "
+        "docking figure)",
     )
     parser.add_argument(
         "--prior",
@@ -94,7 +108,9 @@ def replay_episode(args, max_cycles: int):
     if args.prior == "learned":
         library = load_library(args)[0]
     depth_config = config if args.prior == "depth" else None
-    truths = _truths(args, args.problem, args.instance + 1, depth_config, "train", library, config)
+    truths = _truths(
+        args, args.problem, args.instance + 1, depth_config, args.split, library, config
+    )
     truth = truths[args.instance]
     problem = _problem(args.problem)
     shape = problem.prior if args.prior == "problem" else truth[args.prior]
@@ -437,6 +453,7 @@ def run(args) -> dict:
     return {
         "problem": args.problem,
         "instance": args.instance,
+        "split": args.split,
         "prior": args.prior,
         # learned: which model perception chose (the class, or the generic fallback)
         "learned_model": truth.get("learned_model"),

@@ -1,7 +1,8 @@
 """Sampler settings side by side on one docking episode (``bench threads``, ``bench exits``).
 
-The episode is bench docking's (a training truth, as ``bench posterior``: ``--problem``,
-``--instance``, ``--episode-seed``, ``--prior``, ``--mode``, ``--strategy``), run once with the
+The episode is bench docking's (a training truth unless ``--split test``, as ``bench
+posterior``: ``--problem``, ``--instance``, ``--episode-seed``, ``--prior``, ``--mode``,
+``--strategy``), run once with the
 default settings. Each cycle's sampler call is then repeated with the inputs the loop gave it
 (the history, the previous posterior as warm start, the rows left out and deferred) and its own
 seeded generator, once per setting and repetition; within a repetition the settings run in
@@ -103,7 +104,7 @@ def compare(args, settings: dict[str, Callable[[], dict]], what: str) -> dict:
     return {
         "problem": args.problem,
         "instance": args.instance,
-        "split": "train",
+        "split": args.split,
         "prior": args.prior,
         "mode": args.mode,
         "strategy": args.strategy,
