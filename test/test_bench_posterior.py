@@ -8,6 +8,7 @@ import pytest
 
 from tactile_dock_ros.core import sampling
 from tactile_dock_ros.tools import bench
+from tactile_dock_ros.tools.bench import posterior
 
 
 def test_each_asked_cycle_is_compared_with_its_reference_give_up_included(tmp_path):
@@ -184,3 +185,62 @@ def test_split_test_replays_the_held_out_episode_bench_docking_ran(tmp_path):
     assert trained["split"] == "train" and trained["p_dock"][0] != report["p_dock"][0]
     with pytest.raises(SystemExit):
         bench.main([*replay, "--split", "validation"])
+
+
+def _keep_every_other_reference_draw(monkeypatch, keep_runs_to=None):
+    """Slides that leave every other reference draw (or ``keep_runs_to`` draws of each run)
+    and every sample of the loop; records what was scored against what."""
+    real_errors = posterior._mean_errors
+    scored = []
+
+    def consistent(view, shape, samples):
+        keep = np.zeros(len(samples), dtype=bool)
+        if samples is view.samples:
+            keep[:] = True
+        elif keep_runs_to is None:
+            keep[::2] = True
+        else:
+            keep[:keep_runs_to] = True
+        return keep
+
+    def errors(samples, ref):
+        scored.append((len(samples), len(ref)))
+        return real_errors(samples, ref)
+
+    monkeypatch.setattr(posterior, "_slide_consistent", consistent)
+    monkeypatch.setattr(posterior, "_mean_errors", errors)
+    return scored
+
+
+def test_the_loops_samples_are_scored_against_the_reference_draws_the_slides_leave(
+    tmp_path, monkeypatch
+):
+    """The loop's samples are conditioned on the recorded slides (episode_posterior.draw): the
+    noise floor, the runs' spread, the plan's docking share and the reference plans use the
+    reference draws the slides leave; the repeated sampler runs, which sample the rows alone,
+    are scored against every reference draw."""
+    scored = _keep_every_other_reference_draw(monkeypatch)
+    out = tmp_path / "posterior.json"
+    argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
+    argv += ["--max-cycles", "2", "--cycles", "1", "--particles", "400", "--sampler-runs", "2"]
+    assert bench.main([*argv, "--json", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["cycles"]
+    m = scored[2][0]  # the loop's samples of the cycle
+    n = min(m, 100)  # as many as the loop asked for: the sets of the floor and the plans
+    assert row["slide_consistent"]["reference"] == 0.5
+    assert row["reference_plans"]["of"] == 400 // n  # sets of n of the 400 kept draws
+    # floor, runs apart, the loop's samples: the 400 kept draws (200 of each run)
+    assert scored[:3] == [(n, 400 - n), (200, 200), (m, 400)]
+    # the sampler runs pooled, each alone, pooled against each run: every draw
+    assert scored[3:] == [(2 * n, 800), (n, 800), (n, 800), (2 * n, 400), (2 * n, 400)]
+
+
+def test_a_cycle_whose_slides_leave_too_few_reference_draws_is_skipped(tmp_path, monkeypatch):
+    _keep_every_other_reference_draw(monkeypatch, keep_runs_to=40)
+    out = tmp_path / "posterior.json"
+    argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
+    argv += ["--max-cycles", "2", "--cycles", "1", "--particles", "200", "--json", str(out)]
+    assert bench.main(argv) == 0
+    (row,) = json.loads(out.read_text())["cycles"]
+    assert "the recorded slides leave [40, 40] of 200 draws" in row["skipped"]
+    assert "mean_error_max" not in row
