@@ -235,12 +235,15 @@ def test_the_loops_samples_are_scored_against_the_reference_draws_the_slides_lea
     assert scored[3:] == [(2 * n, 800), (n, 800), (n, 800), (2 * n, 400), (2 * n, 400)]
 
 
-def test_a_cycle_whose_slides_leave_too_few_reference_draws_is_skipped(tmp_path, monkeypatch):
-    _keep_every_other_reference_draw(monkeypatch, keep_runs_to=40)
+@pytest.mark.parametrize("kept", [2, 1])
+def test_a_cycle_whose_slides_leave_too_few_reference_draws_is_skipped(tmp_path, monkeypatch, kept):
+    """Fewer than two sets of the cycle's samples in all (2 + 2 of 2 x 200), or a run with
+    no spread (one draw): the cycle is skipped with the reason, the run goes on."""
+    _keep_every_other_reference_draw(monkeypatch, keep_runs_to=kept)
     out = tmp_path / "posterior.json"
     argv = ["posterior", "--problem", "sloper", "--instance", "1", "--prior", "problem"]
     argv += ["--max-cycles", "2", "--cycles", "1", "--particles", "200", "--json", str(out)]
     assert bench.main(argv) == 0
     (row,) = json.loads(out.read_text())["cycles"]
-    assert "the recorded slides leave [40, 40] of 200 draws" in row["skipped"]
+    assert f"the recorded slides leave [{kept}, {kept}] of 200 draws" in row["skipped"]
     assert "mean_error_max" not in row

@@ -12,10 +12,10 @@ noise floor of independent draws, and the largest one between the reference runs
 reference's own noise), all against the reference draws on which the recorded slides could
 have happened (the loop's samples are conditioned on them; a cycle whose slides leave fewer
 than two sets of its sample count is skipped), the share of samples a recorded slide leaves
-(``slides``), how
-often the cycle's plan docks on the HMC samples and on the reference ones, and what the planner
-decides on sample sets of the same size drawn from the reference (give-ups, P_dock): whether
-the episode continues or gives up because of the posterior or because of the sampler.
+(``slides``), how often the cycle's plan docks on the HMC samples and on the reference ones,
+and what the planner decides on sample sets of the same size drawn from the reference
+(give-ups, P_dock): whether the episode continues or gives up because of the posterior or
+because of the sampler.
 
 ``--sampler-runs K`` adds K more runs of each checked cycle by ``--sampler-method`` (default
 hmc; independent seeds; ``--sampler-start warm``: from the previous cycle's samples as the loop
@@ -306,7 +306,7 @@ def compare(
     against every draw: on sloper train truth 1 (depth prior, non-compliant, whose slip slides
     on) the slides leave 2 % of cycle 1's exact draws, and a sampler that was right read 1.79
     std off. Raises TooFewAccepted when the slides leave fewer than two sets of the cycle's
-    sample count, or none of a run."""
+    sample count, or fewer than two of a run."""
     state = view.state
     kept = np.setdiff1d(np.arange(len(state.history)), state.ignored)
     start = time.perf_counter()
@@ -324,7 +324,7 @@ def compare(
     each = [v[keep] for v, keep in zip(each_drawn, run_keeps, strict=True)]  # and the slides'
     ref_v = np.concatenate(each)
     n = _planned_count(view, n_samples)
-    if len(ref_v) < 2 * n or min(len(v) for v in each) == 0:
+    if len(ref_v) < 2 * n or min(len(v) for v in each) < 2:  # a run's spread needs two
         raise TooFewAccepted(
             f"the recorded slides leave {[len(v) for v in each]} of {particles} draws per "
             f"reference run, fewer than two sets of the cycle's {n} samples in all"
