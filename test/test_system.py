@@ -180,6 +180,8 @@ def test_a_goal_canceled_mid_move_ends_canceled_stops_the_arm_and_keeps_the_hist
         assert client.wait_result(executor, 30.0), _logs(tmp_path)
         assert client.spin_until(executor, cancel.done, 10.0)
         at_cancel["accepted"] = len(cancel.result().goals_canceling) == 1
+        if not at_cancel["accepted"]:  # it ended on its own first: checked (and skipped) below;
+            return record  # its last plan may be a give-up, which runs nothing and reports nothing
         # The executor reports the plan that ran, the latest command is zero, the final status
         # arrived.
         reported = lambda: any(r.plan_id == at_cancel["plan"] for r in record.reports)  # noqa: E731
