@@ -10,6 +10,7 @@ from tactile_dock_ros.msg import (
     EpisodeCycle,
     EpisodeStatus,
     ExecutionReport,
+    SampleRequest,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -70,6 +71,14 @@ def build() -> dict:
             history_length=4,
             dropped_segments=[1, 3],
             compute_time=0.125,
+        ),
+        "SampleRequest": SampleRequest(
+            header=_header(7),
+            episode=1795315710,
+            nonce=0x1234_5678_9ABC_DEF0,
+            hold_id=5,
+            history_length=4,
+            num_samples=400,
         ),
         "DockingPlan": DockingPlan(
             header=_header(4),

@@ -118,12 +118,15 @@ class PlannerEpisode:
     pose: object  # tool_pose publisher
     statuses: list
     plans: list
+    driver: Node  # the node playing the others
+    history: object  # contact_history publisher
 
 
 @contextlib.contextmanager
-def planner_episode(params_dir) -> Iterator[PlannerEpisode]:
-    """The mock profile's planner in-process, a driver playing the other nodes: the sloper
-    prior published, an episode started, an empty contact history published."""
+def planner_episode(params_dir, extra_args: list[str] = ()) -> Iterator[PlannerEpisode]:
+    """The mock profile's planner in-process (``extra_args``: more ROS arguments), a driver
+    playing the other nodes: the sloper prior published, an episode started, an empty contact
+    history published."""
     from ros_helpers import spin_until
     from std_srvs.srv import Trigger
 
@@ -132,7 +135,7 @@ def planner_episode(params_dir) -> Iterator[PlannerEpisode]:
     from tactile_dock_ros.nodes import convert
 
     spec = launch_nodes("mock")["planner"]
-    with node_with_driver(spec, params_dir) as (node, driver, executor):
+    with node_with_driver(spec, params_dir, extra_args) as (node, driver, executor):
         ends = planner_driver(driver)
         start = driver.create_client(Trigger, "start_episode")
         assert spin_until(executor, lambda: start.service_is_ready() and ends.matched(), 10.0)
@@ -144,8 +147,9 @@ def planner_episode(params_dir) -> Iterator[PlannerEpisode]:
         stamp = convert.Header(stamp=driver.get_clock().now().to_msg())
         ends.history.publish(convert.history_to_msg(EpisodeState(), stamp))
         yield PlannerEpisode(
-            node, executor, shape, stamp, ends.samples, ends.pose, ends.statuses, ends.plans
-        )
+            node, executor, shape, stamp, ends.samples, ends.pose, ends.statuses, ends.plans,
+            driver, ends.history,
+        )  # fmt: skip
 
 
 def pose_msg(x: float, y: float, z: float) -> PoseStamped:

@@ -283,6 +283,23 @@ def test_slide_on_slip_is_the_mock_profiles_unless_turned_off(tmp_path):
     assert all(r["results"][0]["errors"] == 0 for r in runs.values())
 
 
+def test_the_give_up_check_is_the_mock_profiles_unless_given(tmp_path, monkeypatch):
+    """``--give-up-samples`` reaches every episode (off in config/mock.yaml), the JSON says it."""
+    assert docking.mock_give_up_samples() == 0
+    seen, real = [], docking.explore.run_episode
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["give_up_samples"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(docking.explore, "run_episode", spy)
+    argv = ["--problems", "sloper", "--prior", "problem", "--mode", "compliant"]
+    default = _quick(tmp_path, "default.json", *argv)
+    checked = _quick(tmp_path, "checked.json", *argv, "--give-up-samples", "400")
+    assert (default["give_up_samples"], checked["give_up_samples"]) == (0, 400)
+    assert seen == [0] * 3 + [400] * 3  # --quick: 3 truths
+
+
 def _quick(tmp_path, name, *extra):
     out = tmp_path / name
     argv = ["docking", "--quick", "--strategies", "ours", "--seed", "1", "--split", "train"]
@@ -323,7 +340,7 @@ def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
     [["--workers", "0"], ["--instances", "0"], ["--prior", "camera"], ["--mode", "stiff"],
      ["--samples", "1"], ["--max-cycles", "-2"], ["--give-up-threshold", "0"],
      ["--give-up-threshold", "1.5"], ["--seed", "-1"], ["--seed", str(2**22)],
-     ["--split", "validation"], ["--sampler-threads", "0"]],
+     ["--split", "validation"], ["--sampler-threads", "0"], ["--give-up-samples", "-1"]],
 )  # fmt: skip
 def test_bad_arguments_are_rejected(bad):
     with pytest.raises(SystemExit) as exit_info:

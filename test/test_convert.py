@@ -134,6 +134,24 @@ def test_samples_round_trip_and_size_checks():
         convert.samples_from_msg(msg)
 
 
+def test_sample_request_round_trip_and_bad_fields():
+    msg = convert.sample_request_to_msg(Header(), 77, 2**62 + 5, 3, 12, 400)
+    assert convert.sample_request_from_msg(msg) == {
+        "episode": 77, "nonce": 2**62 + 5, "hold_id": 3, "history_length": 12, "num_samples": 400,
+    }  # fmt: skip
+    for field, value, match in [
+        ("episode", 0, "episode id 0"),
+        ("history_length", 0, "history_length >= 1"),
+        ("num_samples", 2, "num_samples >= 3"),
+        ("num_samples", validate.MAX_SAMPLES + 1, "num_samples is"),
+        ("history_length", validate.MAX_SEGMENTS + 1, "history_length is"),
+    ]:
+        bad = convert.sample_request_to_msg(Header(), 77, 1, 3, 12, 400)
+        setattr(bad, field, value)
+        with pytest.raises(MessageError, match=match):
+            convert.sample_request_from_msg(bad)
+
+
 def test_plan_round_trip():
     plan = _plan()
     back = convert.plan_from_msg(convert.plan_to_msg(plan, HEADER))

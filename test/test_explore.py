@@ -7,6 +7,7 @@ from tactile_dock_ros.core import (
     constraints,
     episode_posterior,
     explore,
+    planner,
     problems,
     sampling,
     simulate,
@@ -178,6 +179,48 @@ def test_the_loop_draws_what_its_give_up_threshold_needs(monkeypatch):
             problem, truth, "ours", np.random.default_rng(2), 2, give_up_threshold=threshold
         )
     assert set(asked) == {3000, 300} and len(asked) >= 2
+
+
+@pytest.mark.parametrize("give_up_samples", [400, 0])
+def test_a_later_give_up_on_few_samples_is_planned_again_on_more(monkeypatch, give_up_samples):
+    """After a contact, a give-up on fewer than ``give_up_samples`` samples draws on
+    (``episode_posterior.draw_on``) and plans again on those samples followed by more; only
+    that second answer counts. 0: the first give-up stands. (The planner here gives up on
+    every history; the hold draws are off, so the draw-on is what adds samples.)"""
+    calls = []
+    real_plan, real_draw = planner.plan, episode_posterior.draw
+
+    def gives_up_after_a_contact(vertices, prior, state, config):
+        calls.append((len(state.history), vertices.copy()))
+        if not len(state.history):
+            return real_plan(vertices, prior, state, config)
+        reason = "test: gives up"
+        return planner.Plan("give_up", np.zeros((0, 2)), 0.0, 0.0, -1, reason, np.full(2, np.nan))
+
+    monkeypatch.setattr(planner, "plan", gives_up_after_a_contact)
+    monkeypatch.setattr(
+        episode_posterior, "draw", lambda *a, **k: real_draw(*a, **k | {"hold_draws": 0})
+    )
+    problem, truth = _truth("sloper", False)
+    result = explore.run_episode(
+        problem, truth, "ours", np.random.default_rng(2), 3, compliant=False,
+        give_up_samples=give_up_samples,
+    )  # fmt: skip
+    assert result.outcome == "gave_up" and result.cycles_log[-1].plan.reason == "test: gives up"
+    later = [vertices for rows, vertices in calls if rows]
+    if give_up_samples == 0:
+        assert len(later) == 1 and len(later[0]) <= 100
+        return
+    assert len(later) == 2 and len(later[0]) <= 100  # planned again once, then gave up
+    np.testing.assert_array_equal(later[1][: len(later[0])], later[0])
+    assert 0.9 * give_up_samples <= len(later[1]) <= give_up_samples  # no slides: all kept
+
+
+def test_a_bad_give_up_sample_count_is_refused():
+    problem, truth = _truth("sloper", False)
+    for bad in (-1, 2.5):
+        with pytest.raises(ValueError, match="give_up_samples"):
+            explore.run_episode(problem, truth, "ours", give_up_samples=bad)
 
 
 def test_same_seed_same_episode():

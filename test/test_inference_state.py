@@ -244,3 +244,78 @@ def test_with_no_edge_holding_the_node_draws_on_to_give_up_draws(tmp_path, draws
     wanted = max(draws, 100)  # a chain that verifies no draw is dropped: a few fewer at most
     assert 0.9 * wanted <= len(vertices) <= wanted and msg.num_samples == len(vertices)
     assert not planner.edge_holds_anywhere(vertices, prior, LOAD)
+
+
+def test_a_sample_request_draws_on_once_for_the_history_it_names(tmp_path):
+    """The planner's give-up check (``sample_request``): requests without the episode's nonce,
+    of another history length or hold, or for no more samples than were published are refused
+    (dropped, counted, no state changed); the planner's request gets the published samples
+    followed by more draws of the same posterior (every one consistent with the slide), once
+    per history."""
+    from tactile_dock_ros.msg import EpisodeStatus, SampleRequest
+    from test_episode_posterior import HISTORY, LOAD, MU, PRIOR
+
+    nonce = 987654321
+    spec = launch_nodes("mock")["inference"]
+    with node_with_driver(spec, tmp_path, ["-p", "inference:num_samples:=100"]) as (
+        node,
+        driver,
+        executor,
+    ):
+        samples = []
+        driver.create_subscription(ShapeSamples, "shape_samples", samples.append, qos.LATCHED)
+        priors = driver.create_publisher(ShapeDistribution, "terrain_prior", qos.LATCHED)
+        status = driver.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
+        requests = driver.create_publisher(SampleRequest, "sample_request", qos.EVENTS)
+        episode, reports = _inputs(driver)
+        inputs = (reports, status, requests)
+        assert spin_until(executor, lambda: all(p.get_subscription_count() for p in inputs), 10.0)
+        priors.publish(convert.shape_to_msg(PRIOR, convert.Header(frame_id="dock_plane")))
+        status.publish(EpisodeStatus(episode=EPISODE, state=EpisodeStatus.RUNNING, nonce=nonce))
+        episode.publish(UInt32(data=EPISODE))
+        assert spin_until(  # every input in before the report: it alone changes the state
+            executor,
+            lambda: node.status_hold == (EPISODE, 0) and node.prior is not None
+            and node.episode == EPISODE and not node.gate.authentic(EPISODE, nonce + 1),
+            10.0,
+        )  # fmt: skip
+        report = Report(1, ExecutionReport.CONTACT_FAILED, HISTORY, HISTORY.b[-1], "", EPISODE,
+                        nonce)  # fmt: skip
+        reports.publish(convert.report_to_msg(report, convert.Header(frame_id="dock_plane")))
+        assert spin_until(executor, lambda: samples and samples[-1].history_length == 2, 30.0)
+
+        def settled():  # the node's latest set received (a prior or status may resample)
+            latest = node.published
+            return (
+                latest is not None
+                and latest[0] == node.generation
+                and np.array_equal(convert.samples_from_msg(samples[-1]), latest[1].vertices)
+            )
+
+        assert spin_until(executor, settled, 30.0)
+        first, published = convert.samples_from_msg(samples[-1]), len(samples)
+
+        def request(nonce=nonce, hold=0, rows=2, count=400):
+            return convert.sample_request_to_msg(
+                convert.Header(), EPISODE, nonce, hold, rows, count
+            )
+
+        refused = [request(nonce=nonce + 1), request(rows=1), request(hold=9),
+                   request(count=len(first))]  # fmt: skip
+        for n, msg in enumerate(refused, start=1):
+            requests.publish(msg)
+            assert spin_until(
+                executor, lambda n=n: node.malformed.dropped["/sample_request"] == n, 10.0
+            ), msg
+        assert node.request is None and not node.answered and len(samples) == published
+        requests.publish(request())
+        assert spin_until(executor, lambda: len(samples) == published + 1, 30.0)
+        answer = samples[-1]
+        assert answer.history_length == 2 and answer.hold_id == 0
+        more = convert.samples_from_msg(answer)
+        assert len(first) < len(more) <= 400
+        np.testing.assert_array_equal(more[: len(first)], first)
+        assert slides.consistent_with_slides(more, False, HISTORY, [1, 1], LOAD, MU).all()
+        requests.publish(request())  # the same history again: answered already
+        assert spin_until(executor, lambda: node.malformed.dropped["/sample_request"] == 5, 10.0)
+        assert len(samples) == published + 1

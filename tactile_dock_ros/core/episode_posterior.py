@@ -51,6 +51,20 @@ infeasible ones gave up in all three, ECE 0.043 / 0.040, 0.042 / 0.039, 0.042 / 
 of 2160 episodes changed, all on infeasible truths trying a hold of P_dock 0.001-0.01 once or
 twice more before giving up; summed cycle time 82 s, 205 s, 119 s; slowest cycle 0.51 s, 1.26 s,
 0.57 s. On test base seed 4 the cap of 10,000 docked truth 112 in all six episodes.
+
+Decision (a later cycle's give-up read off too few samples, ``draw_on``; opt-in): the hold
+draws above run only when no sample lets an edge hold. A give-up also comes when edges hold but
+no path docks on the samples: on notch test truth 39 of base seed 1 (learned prior,
+non-compliant, episode seed 1; 120 history rows, where ``HOLD_ROW_DRAWS`` / rows allows no hold
+draws) the planner gave up at cycle 9 on 94 samples, and on 100-draw reference sets of that
+posterior it gives up 1 time in 10, otherwise finding a path of median P_dock 0.015. With the
+loops' ``give_up_samples`` (``explore.run_episode``, the planner node's parameter) a would-be
+give-up after a contact on fewer samples draws on to that many (``draw_on``: the chains continue
+on the same rows, as a top-up) and plans again; only the second answer counts. A prototype on
+that episode's split (2026-11-29) gave up again with 100 more draws and docked with 300 more
+(P_dock 0.007 and 0.013 on the drawn-on sets, in 11 cycles). Off by default: it costs cycle
+time where histories are long (~2 ms per draw at ~100 rows and ~0.3 s to plan on 400 samples);
+the measured trade-off is in docs/nodes.md ("Give-up check").
 """
 
 from __future__ import annotations
@@ -139,7 +153,13 @@ def draw(
         expected = max(-(-(n_samples - count) * drawn // max(count, 1)), 1)  # at the share so far
         more, passed = run_on(min(expected, n_samples, budget - drawn))
         drawn, count = drawn + more, count + passed
-    info = {**first.info, "slide_draws": drawn, "slide_rejected": drawn - count, "hold_draws": 0}
+    info = {
+        **first.info,
+        "slide_draws": drawn,
+        "slide_rejected": drawn - count,
+        "hold_draws": 0,
+        "give_up_draws": 0,
+    }
     if count < 2:  # the planner keeps all and reports its own count
         info["slide_rejected"] = 0
         return dataclasses.replace(first, info=info, seconds=time.perf_counter() - start)
@@ -156,6 +176,49 @@ def draw(
         vertices=shape.vertices(z),
         ess=float(sum(p.ess * _share(m) for p, m in rounds)),
         seconds=time.perf_counter() - start,
+        info=info,
+    )
+
+
+def draw_on(
+    shape: GaussianShape,
+    state: EpisodeState,
+    post: sampling.PosteriorSamples,
+    wanted: int,
+    rng: np.random.Generator,
+    load,
+    *,
+    method: str = "hmc",
+    threads: int = 1,
+) -> sampling.PosteriorSamples:
+    """``post`` (``draw``'s samples of ``state``) followed by those of ``wanted`` more draws
+    that pass the slides, for a would-be give-up (module docstring). The chains continue from
+    ``post``'s samples on the same rows (``post``'s dropped and deferred rows stay out, no seed
+    search runs), so every sample is of one posterior. ``info["give_up_draws"]`` counts the
+    draws made; ``slide_draws``, ``slide_rejected`` and ``seconds`` include them; ``ess`` adds
+    theirs times their passed share. Raises ValueError for ``wanted`` < 1 or fewer than two
+    samples in ``post`` (nothing to continue from).
+    """
+    if int(wanted) != wanted or wanted < 1:
+        raise ValueError(f"wanted must be an integer >= 1, got {wanted}")
+    if len(post.z) < 2:
+        raise ValueError(f"draw_on needs two samples to continue from, got {len(post.z)}")
+    start = time.perf_counter()
+    more = sampling.sample_posterior(
+        shape, state.history, int(wanted), rng, method, init_z=post.z,
+        known_dropped=post.ignored, threads=threads,
+    )  # fmt: skip
+    keep = _consistent(shape, state, more, load)
+    z = np.concatenate([post.z, more.z[keep]])
+    info = dict(post.info, give_up_draws=len(keep))
+    info["slide_draws"] = post.info.get("slide_draws", len(post.z)) + len(keep)
+    info["slide_rejected"] = post.info.get("slide_rejected", 0) + int((~keep).sum())
+    return dataclasses.replace(
+        post,
+        z=z,
+        vertices=shape.vertices(z),
+        ess=float(post.ess + more.ess * _share(keep)),
+        seconds=post.seconds + time.perf_counter() - start,
         info=info,
     )
 

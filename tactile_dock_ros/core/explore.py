@@ -96,6 +96,7 @@ def run_episode(
     prior: GaussianShape | None = None,
     observe: Callable[[CycleView], None] | None = None,
     sampler_threads: int = 1,
+    give_up_samples: int = 0,
 ) -> EpisodeResult:
     """Explore ``ground_truth`` (n, 2) of ``problem`` until docked, give-up or ``max_cycles``.
 
@@ -104,7 +105,9 @@ def run_episode(
     are warm-started from the previous cycle's samples and each history row records its cycle
     (from 1), so the planner gets only samples on which every recorded compliant slide could
     have happened, topped up when the slides rule out most draws and, when no sample holds the
-    load anywhere, to the draws a give-up needs (``episode_posterior.draw``).
+    load anywhere, to the draws a give-up needs (``episode_posterior.draw``); a later cycle's
+    would-be give-up on fewer than ``give_up_samples`` samples draws on to that many and plans
+    again (``episode_posterior.draw_on``; 0: off), as the planner node asks the inference node.
     ``prior`` replaces ``problem.prior`` as the robot's belief (e.g. one perceived from a depth
     image, ``perception.mock_camera.depth_prior``; the planner takes its friction); the truth
     is still simulated with the problem's load, friction, start and ``problem.prior.closed``.
@@ -116,8 +119,11 @@ def run_episode(
     ``CycleView`` after each plan, before the move; an exception it raises ends the episode
     as an error like any other. ``sampler_threads``: ``sampling.sample_posterior``'s
     ``threads`` (the same episode in any count, only the cycle times change).
-    Raises ValueError on a bad strategy, ``max_cycles`` or planner setting (``PlannerConfig``).
+    Raises ValueError on a bad strategy, ``max_cycles``, ``give_up_samples`` or planner setting
+    (``PlannerConfig``).
     """
+    if int(give_up_samples) != give_up_samples or give_up_samples < 0:
+        raise ValueError(f"give_up_samples must be an integer >= 0, got {give_up_samples}")
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown strategy {strategy!r}; choose from {STRATEGIES}")
     if max_cycles < 1:
@@ -149,6 +155,16 @@ def run_episode(
             objective = _objective(strategy, cycle)
             config = dataclasses.replace(config, objective=objective)
             decision = planner.plan(post.vertices, prior, state, config)
+            drawn_on = 0.0
+            if _read_off_too_few(decision, state, post, give_up_samples):
+                t_on = time.perf_counter()
+                post = episode_posterior.draw_on(
+                    prior, state, post, give_up_samples - len(post.z), rng, config.load,
+                    method=method, threads=sampler_threads,
+                )  # fmt: skip
+                state = state.sampled(post.z, post.dropped, post.deferral)
+                drawn_on = time.perf_counter() - t_on
+                decision = planner.plan(post.vertices, prior, state, config)
             t2 = time.perf_counter()
             if observe is not None:
                 observe(CycleView(cycle, state, config, decision, post.vertices))
@@ -156,8 +172,8 @@ def run_episode(
                 cycle=cycle,
                 plan=decision,
                 samples=post.vertices[:keep_samples],
-                inference_seconds=t1 - t0,
-                planning_seconds=t2 - t1,
+                inference_seconds=t1 - t0 + drawn_on,
+                planning_seconds=t2 - t1 - drawn_on,
                 dropped=len(post.dropped),
                 deferred=len(post.deferred),
                 rejected=decision.rejected + post.info["slide_rejected"],
@@ -199,6 +215,16 @@ def run_episode(
     except Exception as error:  # the loop reports every failure, never raises
         return _finish(state, log, "error", f"{type(error).__name__}: {error}")
     return _finish(state, log, "cycle_cap", f"no dock after {max_cycles} cycles")
+
+
+def _read_off_too_few(decision, state: EpisodeState, post, give_up_samples: int) -> bool:
+    """Whether a give-up came after an observation on fewer than ``give_up_samples`` samples
+    (the first cycle counts prior draws instead: ``planner.first_cycle_draws``)."""
+    return (
+        decision.decision == "give_up"
+        and len(state.history) > 0
+        and 2 <= len(post.z) < give_up_samples
+    )
 
 
 def slide_evidence(

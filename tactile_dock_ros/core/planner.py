@@ -31,7 +31,8 @@ The draws come from a generator of fixed seed (``PRIOR_DRAWS_SEED``), so a repla
 journaled samples plans the same. Later cycles' posteriors have no cheap exact draws: there the
 sampler draws on when no sample lets an edge hold (``episode_posterior.draw``'s ``hold_draws``,
 ``give_up_draws`` of the threshold; the inference node's ``give_up_draws``) and the planner
-plans on all the draws it gets.
+plans on all the draws it gets; with the loops' ``give_up_samples`` a would-be give-up on fewer
+samples is planned again on more (``episode_posterior.draw_on``).
 
 Steps 1-5 of Sec. V-B, as implemented: (1) LOR from the samples; (2-4) the terminal segment and
 its P_dock for every edge facing the load (an O(n) estimate each), then J; (5) prefixes are

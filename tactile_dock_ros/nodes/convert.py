@@ -48,6 +48,7 @@ from tactile_dock_ros.msg import (
     EpisodeStatus,
     ExecutionReport,
     HoldEvaluation,
+    SampleRequest,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -278,6 +279,40 @@ def samples_from_msg(msg: ShapeSamples) -> np.ndarray:
         raise MessageError(f"dropped_segments index beyond history_length {history_length}")
     samples = validate.within("samples", msg.samples, validate.MAX_COORDINATE_M, "m")
     return samples.reshape(count, n, 2)
+
+
+def sample_request_to_msg(
+    header: Header, episode: int, nonce: int, hold_id: int, history_length: int, num_samples: int
+) -> SampleRequest:
+    """The planner's request for ``num_samples`` samples in all of ``history_length`` rows."""
+    return SampleRequest(
+        header=header,
+        episode=int(episode),
+        nonce=int(nonce),
+        hold_id=int(hold_id),
+        history_length=int(history_length),
+        num_samples=int(num_samples),
+    )
+
+
+def sample_request_from_msg(msg: SampleRequest) -> dict:
+    """SampleRequest -> {episode, nonce, hold_id, history_length, num_samples}; the episode id
+    must not be 0, the history length and sample count within the message limits
+    (``validate.MAX_SEGMENTS``, ``validate.MAX_SAMPLES``; at least 1 row and 3 samples: a
+    request follows a plan on two samples at least, after a contact)."""
+    if msg.episode == 0:
+        raise MessageError("episode id 0 is reserved (no episode)")
+    rows = validate.bounded("history_length", msg.history_length, validate.MAX_SEGMENTS)
+    count = validate.bounded("num_samples", msg.num_samples, validate.MAX_SAMPLES)
+    if rows < 1 or count < 3:
+        raise MessageError(f"need history_length >= 1 and num_samples >= 3, got {rows}, {count}")
+    return {
+        "episode": int(msg.episode),
+        "nonce": int(msg.nonce),
+        "hold_id": int(msg.hold_id),
+        "history_length": rows,
+        "num_samples": count,
+    }
 
 
 # --------------------------------------------------------------------------- plans

@@ -14,6 +14,14 @@ when the slides rule out most, and to ``give_up_draws`` when none lets an edge h
 that the planner's give-up reads "no hold in 3 / give_up_threshold draws") and publishes
 ``shape_samples`` (latched) and RViz markers on ``~/markers``.
 
+Give-up check: the planner reads a give-up after a contact off at least its ``give_up_samples``
+samples; on fewer it publishes a ``sample_request`` (SampleRequest) for the history it planned
+on. This node then draws on from the samples it published (``core.episode_posterior.draw_on``,
+the chains continuing on the same rows, to at most ``give_up_draws`` samples) and publishes
+``shape_samples`` again for the same history. It answers once per episode and history length;
+a request of another episode, without the episode's nonce, of another hold or history length,
+or for no more samples than were published is refused (logged, no state changed).
+
 Holds: every ``terrain_prior`` is kept by its ``hold_id`` (``core.holds.ReceivedPriors``, the
 last ``max_holds``, as the planner keeps them); the episode samples on the hold its
 ``episode_status`` names (``EpisodeStatus.hold_id``; until that status came, the latest prior)
@@ -64,6 +72,7 @@ from tactile_dock_ros.msg import (
     ContactHistory,
     EpisodeStatus,
     ExecutionReport,
+    SampleRequest,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -94,7 +103,8 @@ PARAMS = [
         3000,
         "when no sample lets an edge hold the load after a contact, draw on to this many in all, "
         f"at most {episode_posterior.HOLD_ROW_DRAWS} / history rows (3 / the planner's "
-        "give_up_threshold: none holding in that many bounds P(hold) below it at 95 %); 0: off",
+        "give_up_threshold: none holding in that many bounds P(hold) below it at 95 %); also "
+        "the most samples a sample_request gets; 0: off (requests refused)",
         "",
         0,
         100000,
@@ -150,6 +160,9 @@ class InferenceNode(Node):
         self.stash: deque = deque(maxlen=STASHED_REPORTS)
         self.lock = threading.Lock()  # the state above, between subscriptions and the sampler
         self.generation = 0  # counts state changes; the sampler publishes only current results
+        self.published = None  # (generation, posterior) of the last samples published
+        self.request = None  # (generation, samples wanted in all): the planner's, to answer
+        self.answered: set[tuple[int, int]] = set()  # (episode, history length) requested
         self.journal = journal.for_node(self.p.state_directory, "inference")
         self.saved_warm_start: warm_start.WarmStart | None = None  # read at restore, until used
         self.history_pub = self.create_publisher(ContactHistory, "contact_history", qos.LATCHED)
@@ -163,6 +176,7 @@ class InferenceNode(Node):
             (ExecutionReport, "execution_report", self.on_report, qos.REPORTS, frame),
             (UInt32, "episode", self.on_episode, qos.LATCHED, None),
             (EpisodeStatus, "episode_status", self.on_episode_status, qos.LATCHED, None),
+            (SampleRequest, "sample_request", self.on_sample_request, qos.EVENTS, None),
         ]
         for msg_type, topic, callback, profile, frame_id in subscriptions:
             subscribe(self, msg_type, topic, callback, profile, frame_id, callback_group=inputs)
@@ -215,6 +229,7 @@ class InferenceNode(Node):
             self.episode = episode
             self.episode_state = EpisodeState()
             self.handled_plans.clear()
+            self.answered.clear()
             restored = self.restore()
             self.adopt_saved_warm_start()
             selected = self.select_prior()
@@ -308,6 +323,50 @@ class InferenceNode(Node):
         if self.apply(report):
             self.changed()
 
+    def on_sample_request(self, msg: SampleRequest) -> None:
+        """Draw on for the planner's give-up check (module docstring); a refusal raises
+        MessageError (logged and counted by ``subscribe``) before any state changes."""
+        request = convert.sample_request_from_msg(msg)
+        episode, rows = request["episode"], request["history_length"]
+        wanted = min(request["num_samples"], self.p.give_up_draws)
+        with self.lock:
+            refusal = self.request_refusal(request, wanted)
+            if refusal is None:
+                self.request = (self.generation, wanted)
+                self.answered.add((episode, rows))
+        if refusal is not None:
+            raise convert.MessageError(f"sample request refused: {refusal}")
+        self.get_logger().info(
+            f"episode {episode}: the planner asks for {request['num_samples']} samples of "
+            f"{rows} history rows before giving up: drawing on to {wanted}"
+        )
+        self.sampler.trigger()
+
+    def request_refusal(self, request: dict, wanted: int) -> str | None:
+        """Why a sample request (``convert.sample_request_from_msg``) for ``wanted`` samples in
+        all is refused, None when it is answered; under the lock."""
+        episode, rows = request["episode"], request["history_length"]
+        published = self.published
+        if not self.gate.authentic(episode, request["nonce"]):
+            return f"episode {episode} without the episode's nonce"
+        if episode != self.episode or rows != len(self.episode_state.history):
+            return (
+                f"it is for episode {episode} with {rows} history rows, the current is "
+                f"{self.episode} with {len(self.episode_state.history)}"
+            )
+        if request["hold_id"] != self.prior_hold:
+            return f"it is for hold {request['hold_id']}, sampling is on {self.prior_hold}"
+        if (episode, rows) in self.answered:
+            return "that history was drawn on already"
+        if published is None or published[0] != self.generation:
+            return "its samples are not the latest published (a newer set is coming)"
+        if wanted <= len(published[1].z):
+            return (
+                f"{len(published[1].z)} samples were published, give_up_draws is "
+                f"{self.p.give_up_draws}"
+            )
+        return None
+
     def apply(self, report: Report) -> bool:
         """Add a report of the current episode to the history (journaled first); False for a
         duplicate or late one (the executor's reports are latched: a restart receives them
@@ -354,23 +413,32 @@ class InferenceNode(Node):
             hold_id = self.prior_hold
             fingerprint = self.prior_fingerprint
             episode, cycle, frame_id = self.episode, len(self.handled_plans) + 1, self.frame_id
+            request, self.request = self.request, None
+            published = self.published
         if prior is None or episode == 0:
             return
         history = state.history
+        drawing_on = (
+            request is not None
+            and published is not None
+            and request[0] == published[0] == generation
+        )
         try:
-            posterior = episode_posterior.draw(
-                prior,
-                state,
-                self.p.num_samples,
-                self.rng,
-                self.load,
-                method=self.p.method,
-                threads=self.p.sampler_threads,
-                hold_draws=self.p.give_up_draws,
-            )
+            if drawing_on:  # the planner's give-up check: the published set and more
+                previous = published[1]
+                posterior = episode_posterior.draw_on(
+                    prior, state, previous, request[1] - len(previous.z), self.rng, self.load,
+                    method=self.p.method, threads=self.p.sampler_threads,
+                )  # fmt: skip
+            else:
+                posterior = episode_posterior.draw(
+                    prior, state, self.p.num_samples, self.rng, self.load,
+                    method=self.p.method, threads=self.p.sampler_threads,
+                    hold_draws=self.p.give_up_draws,
+                )  # fmt: skip
         except (ValueError, RuntimeError) as err:  # e.g. no state consistent with the history
             self.get_logger().error(f"posterior sampling failed: {err}")
-            posterior = None
+            posterior = previous if drawing_on else None  # the planner gets its answer
         with self.lock:
             if generation != self.generation:
                 return  # the state changed while sampling: the newer trigger resamples
@@ -378,6 +446,7 @@ class InferenceNode(Node):
                 self.episode_state = state.sampled(
                     posterior.z, posterior.dropped, posterior.deferral
                 )
+                self.published = (generation, posterior)
         if posterior is not None and self.journal is not None:
             self.save_warm_start(episode, len(history), fingerprint, posterior)
         if posterior is None or len(posterior.vertices) < 2:
@@ -418,7 +487,7 @@ class InferenceNode(Node):
             f"{posterior.seconds:.3f} s, dropped {len(posterior.dropped)}, "
             f"deferred {len(posterior.deferred)}, "
             f"{posterior.info['slide_rejected']} of {posterior.info['slide_draws']} draws ruled "
-            "out by slides"
+            "out by slides" + (", drawn on for the planner's give-up check" if drawing_on else "")
         )
         check = posterior.convergence
         if check.reseeded or not check.converged:

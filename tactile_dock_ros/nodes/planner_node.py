@@ -48,6 +48,15 @@ episode whose last event is older than ``resume_timeout`` (wall clock) is not re
 ABORTED. An attempt
 the executor stopped because this node fell silent (``Report.producer_lost``) ends its cycle
 without ending the episode: the next plan is made once inference has the attempt's evidence.
+
+Give-up check: a give-up after a contact on fewer than ``give_up_samples`` samples is not
+published; the node asks inference for that many samples of the same history (``sample_request``,
+SampleRequest with the episode's nonce, once per history length), plans again on the set
+inference publishes and gives up only if that plan does (``core.episode_posterior``'s docstring:
+a give-up read off ~100 samples misses paths of P_dock ~0.01). When no answer came within
+``sample_request_timeout`` the give-up stands on the samples it had (an inference node that does
+not draw on, or was restarted, cannot keep the episode waiting); the bench loop does the same
+(``core.explore.run_episode``'s ``give_up_samples``).
 """
 
 from __future__ import annotations
@@ -77,6 +86,7 @@ from tactile_dock_ros.msg import (
     DockingPlan,
     EpisodeStatus,
     ExecutionReport,
+    SampleRequest,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -114,6 +124,23 @@ PARAMS = [
         "m",
         0.0,
         2.0,
+    ),
+    Param(
+        "give_up_samples",
+        0,
+        "a give-up after a contact on fewer posterior samples asks inference to draw on to this "
+        "many (sample_request) and plans again; 0: off (docs/nodes.md: 400 and its cost)",
+        "",
+        0,
+        100000,
+    ),
+    Param(
+        "sample_request_timeout",
+        10.0,
+        "wait this long for the answer of a sample_request, then give up on the samples at hand",
+        "s",
+        0.1,
+        600.0,
     ),
     Param("max_cycles", 10, "cycle budget of an episode (GAVE_UP after it)", "", 1, 1000),
     Param("stage_timeout", 120.0, "ABORT when samples or a report take longer", "s", 1.0, 3600.0),
@@ -211,6 +238,10 @@ class PlannerNode(Node):
         self.plan_pub = self.create_publisher(DockingPlan, "plan", qos.EVENTS)
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
         self.status_pub = self.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
+        self.request_pub = self.create_publisher(SampleRequest, "sample_request", qos.EVENTS)
+        # the give-up check's request: (episode, history length, node-clock seconds sent,
+        # answered); a later history's give-up asks again
+        self.request = None
         plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
         priors = qos.priors(self.p.max_holds)
         subscriptions = [
@@ -289,6 +320,8 @@ class PlannerNode(Node):
             self.samples_ahead = samples
             return
         self.samples = samples
+        if self.request is not None and self.request[:2] == (self.episode, msg.history_length):
+            self.request = (*self.request[:3], True)  # the answer (or a newer set: as good)
         self.maybe_plan()
 
     def check_samples(self, msg: ShapeSamples, vertices) -> None:
@@ -437,6 +470,16 @@ class PlannerNode(Node):
         stage_timeout for samples or a report."""
         if self.state != RUNNING:
             return
+        if self.awaiting_answer() and now_seconds(self) - self.request[2] > (
+            self.p.sample_request_timeout
+        ):
+            self.get_logger().warning(
+                f"episode {self.episode}: no answer to the sample request within "
+                f"{self.p.sample_request_timeout:g} s; the give-up stands on the samples at hand"
+            )
+            self.request = (*self.request[:3], True)
+            self.maybe_plan()
+            return
         if (
             self.awaiting_plan is not None
             and now_seconds(self) - self.last_plan[1] >= RESEND_PERIOD
@@ -448,8 +491,35 @@ class PlannerNode(Node):
         waiting = "execution report" if self.awaiting_plan is not None else "posterior samples"
         self.finish(ABORTED, f"no {waiting} within {self.p.stage_timeout:.0f} s")
 
+    def awaiting_answer(self) -> bool:
+        """Whether a sample request of the current history is unanswered."""
+        history = (self.episode, len(self.episode_state.history))
+        return self.request is not None and self.request[:2] == history and not self.request[3]
+
+    def ask_for_samples(self, count: int) -> bool:
+        """Before a give-up on ``count`` samples after a contact: ask inference for
+        ``give_up_samples`` (once per history); False when that is not wanted or was done."""
+        rows, wanted = len(self.episode_state.history), self.p.give_up_samples
+        asked = self.request is not None and self.request[:2] == (self.episode, rows)
+        if rows == 0 or count >= wanted or asked:
+            return False
+        msg, _ = self.samples
+        self.request_pub.publish(
+            convert.sample_request_to_msg(
+                header(self, ""), self.episode, self.nonce, msg.hold_id, rows, wanted
+            )
+        )
+        self.request = (self.episode, rows, now_seconds(self), False)
+        self.get_logger().info(
+            f"episode {self.episode} cycle {len(self.cycles) + 1}: give-up on {count} samples; "
+            f"asked inference for {wanted} of the {rows} history rows"
+        )
+        return True
+
     def ready(self) -> bool:
         if self.state != RUNNING or self.awaiting_plan is not None or self.samples is None:
+            return False
+        if self.awaiting_answer():
             return False
         msg, _ = self.samples
         fresh = Time.from_msg(msg.header.stamp) >= self.episode_start
@@ -488,6 +558,9 @@ class PlannerNode(Node):
             else:
                 self.get_logger().info(message)
         dock = result.decision == "dock"
+        if not dock and self.ask_for_samples(len(vertices)):
+            self.stage_start = now_seconds(self)
+            return
         history_length = len(self.episode_state.history)
         command = PlanCommand(
             plan_id=len(self.cycles) + 1,

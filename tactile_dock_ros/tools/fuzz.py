@@ -106,6 +106,9 @@ def bases(now_s: int, live: dict) -> dict:
         "/execution_report": fuzz_messages.valid_report(EPISODES[-1], SEED_PLANS[0], -0.3, plane),
         "/episode": UInt32(data=EPISODES[-1]),
         "/episode_status": convert.episode_status_to_msg(_header(now_s, ""), "IDLE", 0, "", 0, []),
+        "/sample_request": convert.sample_request_to_msg(
+            _header(now_s, ""), EPISODES[-1], 0, 0, len(seeded.history), 400
+        ),
         "/arm/tool_pose": convert.pose_to_msg(frame.point_from_plane([0.0, 0.45]), base),
         "/ft_sensor/wrench": convert.wrench_to_msg(np.array([0.3, -0.2, 0.5]), base),
         "/arm/cmd_twist": convert.twist_to_msg(np.zeros(3), base),

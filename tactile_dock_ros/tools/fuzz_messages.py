@@ -267,6 +267,20 @@ def _status_rows() -> list[Row]:
     ]
 
 
+def _request_rows() -> list[Row]:
+    return [
+        ("episode 0", True, _set("episode", 0)),
+        ("history_length 0", True, _set("history_length", 0)),
+        ("history_length over limit", True, _set("history_length", validate.MAX_SEGMENTS + 1)),
+        ("num_samples 2", True, _set("num_samples", 2)),
+        ("num_samples over limit", True, _set("num_samples", validate.MAX_SAMPLES + 1)),
+        ("nonce forged", False, _set("nonce", lambda rng, ctx: int(rng.integers(1, 2**62)))),
+        ("history_length stale", False, _set("history_length", 1)),
+        ("episode of the past", False, _set("episode", lambda rng, ctx: ctx.episodes[0])),
+        ("episode unknown", False, _set("episode", lambda rng, ctx: int(rng.integers(3, 2**31)))),
+    ]  # fmt: skip
+
+
 def _episode_rows() -> list[Row]:
     return [
         ("episode 0", True, _set("data", 0)),
@@ -300,6 +314,7 @@ def table(type_name: str, frame_checked: bool) -> list[Row]:
         "sensor_msgs/msg/Image": lambda: [*_image_rows(), *stamped],
         "sensor_msgs/msg/CameraInfo": lambda: [*_camera_info_rows(), *stamped],
         "tactile_dock_ros/msg/EpisodeStatus": lambda: [*_status_rows(), *stamped],
+        "tactile_dock_ros/msg/SampleRequest": lambda: [*_request_rows(), *stamped],
         "std_msgs/msg/UInt32": _episode_rows,
     }  # fmt: skip
     return rows[type_name]()

@@ -97,6 +97,19 @@ def mock_give_up_threshold() -> float:
     return float(profile["planner"]["ros__parameters"]["give_up_threshold"])
 
 
+def mock_give_up_samples() -> int:
+    """The mock profile's planner ``give_up_samples`` (``config/mock.yaml``)."""
+    profile = yaml.safe_load(MOCK_PROFILE.read_text())
+    return int(profile["planner"]["ros__parameters"]["give_up_samples"])
+
+
+def _count(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
 def mock_slide_on_slip() -> bool:
     """The mock profile's executor ``slide_on_slip`` (``config/mock.yaml``; absent: False)."""
     profile = yaml.safe_load(MOCK_PROFILE.read_text())
@@ -118,6 +131,19 @@ def _at_least(minimum: int):
         return value
 
     return parse
+
+
+def add_give_up_samples_argument(parser) -> None:
+    """``--give-up-samples``: the episode loop's ``give_up_samples`` (this suite's and the
+    replays' of ``bench posterior``)."""
+    parser.add_argument(
+        "--give-up-samples",
+        type=_count,
+        default=mock_give_up_samples(),
+        help="a give-up after a contact is read off at least this many posterior samples: "
+        "fewer are drawn on first (core.episode_posterior.draw_on; default: the mock "
+        "profile's planner give_up_samples; 0: off, the paper's loop)",
+    )
 
 
 def add_episode_arguments(parser) -> None:
@@ -207,6 +233,7 @@ def add_arguments(parser) -> None:
         help="compliant: ideal compliance; non-compliant: the mock profile's",
     )
     add_episode_arguments(parser)
+    add_give_up_samples_argument(parser)
     add_slide_argument(parser)
     parser.add_argument(
         "--episode-seeds",
@@ -252,6 +279,7 @@ class _Task:
     give_up_threshold: float
     slide_on_slip: bool = False
     sampler_threads: int = 1
+    give_up_samples: int = 0
 
 
 @functools.cache
@@ -293,6 +321,7 @@ def _episode(task: _Task) -> dict:
         slide_on_slip=task.slide_on_slip,
         prior=task.prior,
         sampler_threads=task.sampler_threads,
+        give_up_samples=task.give_up_samples,
     )
     return {
         **record,
@@ -779,6 +808,7 @@ def run(args) -> dict:
             args.give_up_threshold,
             args.slide_on_slip,
             args.sampler_threads,
+            args.give_up_samples,
         )
         for i in range(instances)
         for repeat in range(args.episode_seeds)
@@ -833,6 +863,7 @@ def run(args) -> dict:
         "max_cycles": max_cycles,
         "samples": args.samples,
         "give_up_threshold": args.give_up_threshold,
+        "give_up_samples": args.give_up_samples,
         "slide_on_slip": args.slide_on_slip,
         "episode_seeds": args.episode_seeds,
         "workers": args.workers,

@@ -50,6 +50,7 @@ from tactile_dock_ros.tools.bench.docking import (
     _problem,
     _truths,
     add_episode_arguments,
+    add_give_up_samples_argument,
     add_library_arguments,
     add_slide_argument,
     episode_seed,
@@ -99,6 +100,7 @@ def add_replay_arguments(parser, instance: int, seed: int) -> None:
     parser.add_argument("--max-cycles", type=_at_least(1), default=12, help="cycle cap")
     parser.add_argument("--samples", type=_at_least(2), default=100, help="posterior samples")
     add_episode_arguments(parser)
+    add_give_up_samples_argument(parser)
     add_slide_argument(parser)
 
 
@@ -130,6 +132,7 @@ def replay_episode(args, max_cycles: int):
         max_cycles,
         n_samples=args.samples,
         give_up_threshold=args.give_up_threshold,
+        give_up_samples=args.give_up_samples,
         compliant=args.mode == "compliant",
         slide_on_slip=args.slide_on_slip,
         prior=shape,
