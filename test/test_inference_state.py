@@ -294,6 +294,9 @@ def test_a_sample_request_draws_on_once_for_the_history_it_names(tmp_path):
 
         assert spin_until(executor, settled, 30.0)
         first, published = convert.samples_from_msg(samples[-1]), len(samples)
+        latest = node.published
+        node.sample()  # a second wake-up of the sampler for the same state samples nothing
+        assert node.published is latest
 
         def request(nonce=nonce, hold=0, rows=2, count=400):
             return convert.sample_request_to_msg(

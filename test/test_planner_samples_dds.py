@@ -107,7 +107,11 @@ def test_a_give_up_after_a_contact_on_few_samples_asks_inference_for_more(
         assert request == {"episode": node.episode, "nonce": node.nonce, "hold_id": 0,
                            "history_length": 1, "num_samples": 400}  # fmt: skip
         assert not ep.plans and node.state == "RUNNING" and planned == [(20, 1)]
-        if case == "answered":
+        if case == "answered":  # a resample of the history is not the answer; 400 samples are
+            again = convert.samples_to_msg(drawn[20:40], stamp, "hmc", 5.0, 1)
+            ep.samples.publish(again)
+            assert spin_until(executor, lambda: node.samples[0] == again, 10.0)
+            assert not ep.plans and node.state == "RUNNING" and len(planned) == 1
             ep.samples.publish(convert.samples_to_msg(drawn, stamp, "hmc", 5.0, 1))
         assert spin_until(executor, lambda: bool(ep.plans), 10.0)
         assert node.state == "GAVE_UP" and len(requests) == 1

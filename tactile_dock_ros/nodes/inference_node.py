@@ -43,7 +43,9 @@ Threads (``main`` spins a MultiThreadedExecutor): the subscriptions (one mutuall
 group) only update the state under a lock and publish the history; sampling runs in a guard
 condition's callback of its own group, so the node keeps taking reports, answering parameter
 services and publishing the history while it samples. A result sampled on a history that
-changed meanwhile is dropped and the newest history sampled instead.
+changed meanwhile is dropped and the newest history sampled instead. A wake-up for a state whose
+samples are out samples nothing: under load one trigger was seen to run the callback twice,
+which published a second set of the same history.
 """
 
 from __future__ import annotations
@@ -423,6 +425,8 @@ class InferenceNode(Node):
             and published is not None
             and request[0] == published[0] == generation
         )
+        if not drawing_on and published is not None and published[0] == generation:
+            return  # this state's samples are out: a second wake-up for one trigger
         try:
             if drawing_on:  # the planner's give-up check: the published set and more
                 previous = published[1]

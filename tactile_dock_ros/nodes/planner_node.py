@@ -50,13 +50,14 @@ the executor stopped because this node fell silent (``Report.producer_lost``) en
 without ending the episode: the next plan is made once inference has the attempt's evidence.
 
 Give-up check: a give-up after a contact on fewer than ``give_up_samples`` samples is not
-published; the node asks inference for that many samples of the same history (``sample_request``,
-SampleRequest with the episode's nonce, once per history length), plans again on the set
-inference publishes and gives up only if that plan does (``core.episode_posterior``'s docstring:
-a give-up read off ~100 samples misses paths of P_dock ~0.01). When no answer came within
-``sample_request_timeout`` the give-up stands on the samples it had (an inference node that does
-not draw on, or was restarted, cannot keep the episode waiting); the bench loop does the same
-(``core.explore.run_episode``'s ``give_up_samples``).
+published; the node asks inference for that many samples of the same history
+(``sample_request``, SampleRequest with the episode's nonce, once per history length), plans
+again on the first set of that history with more samples than it had and gives up only if that
+plan does (``core.episode_posterior``'s docstring: a give-up read off ~100 samples misses paths
+of P_dock ~0.01). When no answer came within ``sample_request_timeout`` the give-up stands on
+the samples it had (an inference node that does not draw on, or was restarted, cannot keep the
+episode waiting); the bench loop does the same (``core.explore.run_episode``'s
+``give_up_samples``).
 """
 
 from __future__ import annotations
@@ -215,6 +216,23 @@ RUNNING, DOCKED, GAVE_UP, ABORTED, IDLE = "RUNNING", "DOCKED", "GAVE_UP", "ABORT
 CANCELED = "CANCELED"
 
 
+@dataclasses.dataclass
+class PendingRequest:
+    """A sample request of the give-up check (module docstring): its episode, history rows,
+    node-clock seconds sent, the samples of the set it asked about, and whether it is over
+    (answered with more samples, or timed out)."""
+
+    episode: int
+    rows: int
+    sent_s: float
+    samples: int
+    answered: bool = False
+
+    def asked_about(self, node) -> bool:
+        """Whether it is of ``node``'s current episode and history."""
+        return (self.episode, self.rows) == (node.episode, len(node.episode_state.history))
+
+
 class PlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("planner", **kwargs)
@@ -239,9 +257,7 @@ class PlannerNode(Node):
         self.episode_pub = self.create_publisher(UInt32, "episode", qos.LATCHED)
         self.status_pub = self.create_publisher(EpisodeStatus, "episode_status", qos.LATCHED)
         self.request_pub = self.create_publisher(SampleRequest, "sample_request", qos.EVENTS)
-        # the give-up check's request: (episode, history length, node-clock seconds sent,
-        # answered); a later history's give-up asks again
-        self.request = None
+        self.request: PendingRequest | None = None  # the give-up check's, the latest
         plane_id, base_id = self.p.plane_frame_id, self.p.base_frame_id
         priors = qos.priors(self.p.max_holds)
         subscriptions = [
@@ -320,8 +336,10 @@ class PlannerNode(Node):
             self.samples_ahead = samples
             return
         self.samples = samples
-        if self.request is not None and self.request[:2] == (self.episode, msg.history_length):
-            self.request = (*self.request[:3], True)  # the answer (or a newer set: as good)
+        if self.awaiting_answer() and msg.history_length == self.request.rows:
+            # the answer has more samples than the set asked about; another set of the same
+            # history (a resample) is planned on once the answer or the timeout comes
+            self.request.answered = msg.num_samples > self.request.samples
         self.maybe_plan()
 
     def check_samples(self, msg: ShapeSamples, vertices) -> None:
@@ -470,14 +488,14 @@ class PlannerNode(Node):
         stage_timeout for samples or a report."""
         if self.state != RUNNING:
             return
-        if self.awaiting_answer() and now_seconds(self) - self.request[2] > (
+        if self.awaiting_answer() and now_seconds(self) - self.request.sent_s > (
             self.p.sample_request_timeout
         ):
             self.get_logger().warning(
                 f"episode {self.episode}: no answer to the sample request within "
                 f"{self.p.sample_request_timeout:g} s; the give-up stands on the samples at hand"
             )
-            self.request = (*self.request[:3], True)
+            self.request.answered = True
             self.maybe_plan()
             return
         if (
@@ -493,14 +511,14 @@ class PlannerNode(Node):
 
     def awaiting_answer(self) -> bool:
         """Whether a sample request of the current history is unanswered."""
-        history = (self.episode, len(self.episode_state.history))
-        return self.request is not None and self.request[:2] == history and not self.request[3]
+        request = self.request
+        return request is not None and not request.answered and request.asked_about(self)
 
     def ask_for_samples(self, count: int) -> bool:
         """Before a give-up on ``count`` samples after a contact: ask inference for
         ``give_up_samples`` (once per history); False when that is not wanted or was done."""
         rows, wanted = len(self.episode_state.history), self.p.give_up_samples
-        asked = self.request is not None and self.request[:2] == (self.episode, rows)
+        asked = self.request is not None and self.request.asked_about(self)
         if rows == 0 or count >= wanted or asked:
             return False
         msg, _ = self.samples
@@ -509,7 +527,7 @@ class PlannerNode(Node):
                 header(self, ""), self.episode, self.nonce, msg.hold_id, rows, wanted
             )
         )
-        self.request = (self.episode, rows, now_seconds(self), False)
+        self.request = PendingRequest(self.episode, rows, now_seconds(self), count)
         self.get_logger().info(
             f"episode {self.episode} cycle {len(self.cycles) + 1}: give-up on {count} samples; "
             f"asked inference for {wanted} of the {rows} history rows"

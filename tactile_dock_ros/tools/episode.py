@@ -165,14 +165,17 @@ class EpisodeClient(Node):
         t0 = self.start(executor, timeout_s, goal)
         self.wait_result(executor, timeout_s, progress)
         self.record.wall_seconds = time.monotonic() - t0
-        # Topics are not ordered with each other: let in-flight reports, the final status and
-        # the last feedback (sent at the end of an episode that planned) arrive (bounded).
+        # Topics are not ordered with each other: let in-flight plans (the result counts
+        # them), reports, the final status and the last feedback (sent at the end of an episode
+        # that planned) arrive (bounded).
         docking = sum(p.decision == DockingPlan.DOCK for p in self.record.plans)
         feedback = self.record.feedback
+        cycles = 0 if self.record.result is None else self.record.result.cycles
         self.spin_until(
             executor,
             lambda: (
-                len(self.record.reports) >= docking
+                len(self.record.plans) >= cycles
+                and len(self.record.reports) >= docking
                 and self.status_state() == self.record.state
                 and (
                     not self.record.plans
