@@ -72,6 +72,24 @@ def test_invalid_parameter_values_stop_the_node(name, override, match, tmp_path)
         pass
 
 
+@pytest.mark.parametrize("check", ["on", "off"])
+def test_a_sample_request_must_time_out_before_the_stage(check, tmp_path):
+    """With the give-up check on, ``sample_request_timeout`` at or above ``stage_timeout`` (60 s
+    in the mock profile) stops the planner; off, the timeout is unused and not checked."""
+    spec = launch_nodes("mock")["planner"]
+    args = ["-p", "planner:sample_request_timeout:=60.0", "-p",
+            f"planner:give_up_samples:={400 if check == 'on' else 0}"]  # fmt: skip
+    if check == "off":
+        with node_from_launch(spec, tmp_path, args) as (node, _):
+            assert node.p.sample_request_timeout == node.p.stage_timeout == 60.0
+        return
+    with (
+        pytest.raises(ValueError, match=r"sample_request_timeout .* must be below stage_timeout"),
+        node_from_launch(spec, tmp_path, args),
+    ):
+        pass
+
+
 @pytest.mark.parametrize("profile", ["mock", "robot"])
 def test_the_planner_plans_with_its_parameters(profile, tmp_path):
     from tactile_dock_ros.core.episode import PlannerConfig

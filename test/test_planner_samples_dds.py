@@ -85,7 +85,7 @@ def test_a_give_up_after_a_contact_on_few_samples_asks_inference_for_more(
     monkeypatch.setattr(planner_node, "plan_docking", gives_up)
     wanted = 0 if case == "off" else 400
     args = ["-p", f"planner:give_up_samples:={wanted}", "-p",
-            f"planner:sample_request_timeout:={0.5 if case == 'unanswered' else 60.0}"]  # fmt: skip
+            f"planner:sample_request_timeout:={0.5 if case == 'unanswered' else 30.0}"]  # fmt: skip
     with planner_episode(tmp_path, args) as ep:
         node, executor, shape, stamp = ep.node, ep.executor, ep.shape, ep.stamp
         requests = []

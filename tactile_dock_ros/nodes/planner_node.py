@@ -138,7 +138,8 @@ PARAMS = [
     Param(
         "sample_request_timeout",
         10.0,
-        "wait this long for the answer of a sample_request, then give up on the samples at hand",
+        "wait this long for the answer of a sample_request, then give up on the samples at "
+        "hand; below stage_timeout",
         "s",
         0.1,
         600.0,
@@ -237,6 +238,12 @@ class PlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("planner", **kwargs)
         self.p = declare(self, PARAMS)
+        if self.p.give_up_samples and self.p.sample_request_timeout >= self.p.stage_timeout:
+            raise ValueError(
+                f"parameter sample_request_timeout ({self.p.sample_request_timeout:g} s) must be "
+                f"below stage_timeout ({self.p.stage_timeout:g} s) with give_up_samples on: "
+                "the stage timeout would abort the episode first"
+            )
         self.configure(goal_settings(Dock.Goal(), self.p))
         self.plane = plane_frame(self.p)
         self.priors = ReceivedPriors(self.p.max_holds)
