@@ -146,8 +146,10 @@ def test_infeasible_terrain_ends_gave_up(tmp_path):
     record, tool = _episode(tmp_path, INFEASIBLE_SEED, planner={"give_up_samples": draws})
     assert record.state == "GAVE_UP", _logs(tmp_path)
     if record.plans[-1].decision == record.plans[-1].GIVE_UP and len(record.plans) > 1:
-        logs = "\n".join(p.read_text() for p in tmp_path.glob("*.log"))  # asked first
-        assert f"asked inference for {draws}" in logs and f"drawing on to {draws}" in logs, logs
+        asked = record.requests[-1]  # the give-up after a contact was checked first
+        assert (asked.num_samples, asked.history_length) == (draws, record.plans[-1].history_length)
+        logs = "\n".join(p.read_text() for p in tmp_path.glob("*.log"))
+        assert f"drawing on to {draws}" in logs, logs
     assert all(r.outcome != r.DOCKED for r in record.reports)
     _assert_within_limits(record, tool)
     _assert_feedback_per_cycle(record)
@@ -160,8 +162,9 @@ def test_infeasible_terrain_ends_gave_up(tmp_path):
         t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
         for t in metadata["rosbag2_bagfile_information"]["topics_with_message_count"]
     }
-    for topic, profile in bag.QOS.items():
-        assert [p["durability"] for p in offered[topic]] == [profile.durability.name.lower()]
+    for topic, profiles in offered.items():
+        assert [p["durability"] for p in profiles] == [bag.QOS[topic].durability.name.lower()]
+    assert set(bag.QOS) - set(offered) <= {"/sample_request"}  # requests only with a check
     out = tmp_path / "replay.json"
     config = REPO_ROOT / "config" / "mock.yaml"
     assert replay.main([str(tmp_path / "bag"), "--config", str(config), "--json", str(out)]) == 0

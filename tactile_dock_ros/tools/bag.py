@@ -3,7 +3,7 @@
 On the robot, record what ``tools.replay`` needs with::
 
     ros2 bag record /terrain_prior /contact_history /shape_samples /plan /execution_report \\
-        /episode_status
+        /episode_status /sample_request
 
 PyPI has no rosbag2, so here the pure-Python ``rosbags`` library reads and writes the same
 format, and rclpy (de)serializes the messages (CDR): a bag written here plays with ``ros2 bag
@@ -53,6 +53,7 @@ EPISODE_TOPICS = {
     "/plan": "tactile_dock_ros/msg/DockingPlan",
     "/execution_report": "tactile_dock_ros/msg/ExecutionReport",
     "/episode_status": "tactile_dock_ros/msg/EpisodeStatus",
+    "/sample_request": "tactile_dock_ros/msg/SampleRequest",  # the planner's give-up check
 }
 # The QoS each topic is published with (nodes.qos; perception's default max_holds): what a bag
 # offers when it is played.
@@ -63,6 +64,7 @@ QOS = {
     "/plan": qos.EVENTS,
     "/execution_report": qos.REPORTS,
     "/episode_status": qos.LATCHED,
+    "/sample_request": qos.EVENTS,
 }
 BAG_VERSION = 9  # rosbag2 metadata version written (Jazzy's; later rosbag2 reads it)
 # rclpy's major version in each ROS 2 distro (its package.xml; e.g. the PyPI wheels ros-rclpy

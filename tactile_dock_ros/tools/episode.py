@@ -25,6 +25,7 @@ from tactile_dock_ros.msg import (
     DockingPlan,
     EpisodeStatus,
     ExecutionReport,
+    SampleRequest,
     ShapeDistribution,
     ShapeSamples,
 )
@@ -45,6 +46,7 @@ class EpisodeRecord:
     history: ContactHistory | None = None
     plans: list = field(default_factory=list)
     reports: list = field(default_factory=list)
+    requests: list = field(default_factory=list)  # the planner's sample requests (give-up check)
     status: EpisodeStatus | None = None
     feedback: list = field(default_factory=list)  # Dock.Feedback, as received
     result: Dock.Result | None = None
@@ -110,6 +112,7 @@ class EpisodeClient(Node):
             (ShapeSamples, "/shape_samples", self.record.samples.append, qos.LATCHED),
             (DockingPlan, "/plan", self.on_plan, qos.EVENTS),
             (ExecutionReport, "/execution_report", self.record.reports.append, qos.EVENTS),
+            (SampleRequest, "/sample_request", self.record.requests.append, qos.EVENTS),
         ]
         for msg_type, topic, callback, profile in subscriptions:
             if topic in bag.EPISODE_TOPICS:
