@@ -18,7 +18,10 @@ def test_a_changed_share_file_reinstalls_the_share_directory():
     database = subprocess.run(
         ["make", "-pn", "setup"], cwd=REPO_ROOT, env=env, capture_output=True, text=True
     ).stdout
-    rules = [line for line in database.splitlines() if line.split(":")[0].endswith("stamps/msgs")]
+    rules = [  # rule lines only: with a stale stamp, -n also prints "touch .venv/.stamps/msgs"
+        line for line in database.splitlines()
+        if ":" in line and line.split(":")[0].endswith("stamps/msgs")
+    ]  # fmt: skip
     prerequisites = {p for line in rules for p in line.split(":", 1)[1].split()}
     shared = {
         str(path.relative_to(REPO_ROOT))
