@@ -141,12 +141,9 @@ def draw(
     budget, enough = top_up_draws * n_samples, int(np.ceil(TOP_UP_SHARE * n_samples))
 
     def run_on(wanted: int) -> tuple[int, int]:  # the chains go on from their last draws
-        post = sampling.sample_posterior(
-            shape, state.history, wanted, rng, method, init_z=rounds[-1][0].z,
-            known_dropped=first.ignored, threads=threads,
-        )  # fmt: skip
-        more = _consistent(shape, state, post, load)
-        rounds.append((post, more))
+        args = (first.ignored, rounds[-1][0].z, wanted, rng, load, method, threads)
+        rounds.append(_continued(shape, state, *args))
+        more = rounds[-1][1]
         return len(more), int(more.sum())
 
     while count < enough and drawn < budget and len(rounds[-1][0].z):  # a round gave none: stop
@@ -204,11 +201,9 @@ def draw_on(
     if len(post.z) < 2:
         raise ValueError(f"draw_on needs two samples to continue from, got {len(post.z)}")
     start = time.perf_counter()
-    more = sampling.sample_posterior(
-        shape, state.history, int(wanted), rng, method, init_z=post.z,
-        known_dropped=post.ignored, threads=threads,
-    )  # fmt: skip
-    keep = _consistent(shape, state, more, load)
+    more, keep = _continued(
+        shape, state, post.ignored, post.z, int(wanted), rng, load, method, threads
+    )
     z = np.concatenate([post.z, more.z[keep]])
     info = dict(post.info, give_up_draws=len(keep))
     info["slide_draws"] = post.info.get("slide_draws", len(post.z)) + len(keep)
@@ -221,6 +216,16 @@ def draw_on(
         seconds=post.seconds + time.perf_counter() - start,
         info=info,
     )
+
+
+def _continued(shape, state, ignored, init_z, wanted, rng, load, method, threads):
+    """``wanted`` more draws of ``state``'s rows but ``ignored`` (the first call's dropped and
+    deferred ones), the chains going on from ``init_z``, and which of them pass the slides."""
+    post = sampling.sample_posterior(
+        shape, state.history, wanted, rng, method, init_z=init_z, known_dropped=ignored,
+        threads=threads,
+    )  # fmt: skip
+    return post, _consistent(shape, state, post, load)
 
 
 def _holds(shape, rounds, load, n_samples: int) -> bool:

@@ -221,9 +221,7 @@ def _read_off_too_few(decision, state: EpisodeState, post, give_up_samples: int)
     """Whether a give-up came after an observation on fewer than ``give_up_samples`` samples
     (the first cycle counts prior draws instead: ``planner.first_cycle_draws``)."""
     return (
-        decision.decision == "give_up"
-        and len(state.history) > 0
-        and 2 <= len(post.z) < give_up_samples
+        decision.decision == "give_up" and len(state.history) > 0 and len(post.z) < give_up_samples
     )
 
 

@@ -91,29 +91,24 @@ PERCEPTION_CONFIG = Path(__file__).resolve().parents[3] / "config" / "perception
 MOCK_PROFILE = Path(__file__).resolve().parents[3] / "config" / "mock.yaml"
 
 
+def _mock_parameters(node: str) -> dict:
+    """``node``'s parameters in the mock profile (``config/mock.yaml``)."""
+    return yaml.safe_load(MOCK_PROFILE.read_text())[node]["ros__parameters"]
+
+
 def mock_give_up_threshold() -> float:
-    """The mock profile's planner ``give_up_threshold`` (``config/mock.yaml``)."""
-    profile = yaml.safe_load(MOCK_PROFILE.read_text())
-    return float(profile["planner"]["ros__parameters"]["give_up_threshold"])
+    """The mock profile's planner ``give_up_threshold``."""
+    return float(_mock_parameters("planner")["give_up_threshold"])
 
 
 def mock_give_up_samples() -> int:
-    """The mock profile's planner ``give_up_samples`` (``config/mock.yaml``)."""
-    profile = yaml.safe_load(MOCK_PROFILE.read_text())
-    return int(profile["planner"]["ros__parameters"]["give_up_samples"])
-
-
-def _count(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
+    """The mock profile's planner ``give_up_samples``."""
+    return int(_mock_parameters("planner")["give_up_samples"])
 
 
 def mock_slide_on_slip() -> bool:
-    """The mock profile's executor ``slide_on_slip`` (``config/mock.yaml``; absent: False)."""
-    profile = yaml.safe_load(MOCK_PROFILE.read_text())
-    return bool(profile["executor"]["ros__parameters"].get("slide_on_slip", False))
+    """The mock profile's executor ``slide_on_slip`` (absent: False)."""
+    return bool(_mock_parameters("executor").get("slide_on_slip", False))
 
 
 def _probability(text: str) -> float:
@@ -138,7 +133,7 @@ def add_give_up_samples_argument(parser) -> None:
     replays' of ``bench posterior``)."""
     parser.add_argument(
         "--give-up-samples",
-        type=_count,
+        type=_at_least(0),
         default=mock_give_up_samples(),
         help="a give-up after a contact is read off at least this many posterior samples: "
         "fewer are drawn on first (core.episode_posterior.draw_on; default: the mock "

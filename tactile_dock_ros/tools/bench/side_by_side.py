@@ -7,9 +7,8 @@ with the inputs the loop gave it (the history, the previous posterior as warm st
 left out and deferred) and its own seeded generator, once per setting and repetition; within a
 repetition the settings run in rotating order, so that a drift of the machine's speed spreads
 over all of them. Per cycle: the median seconds per setting and its ratio to the first
-setting's. The settings change only how
-fast the sampler is: a cycle whose draws differ between them fails the run. Cycles without a
-history (prior draws only) are not timed.
+setting's. The settings change only how fast the sampler is: a cycle whose draws differ between
+them fails the run. Cycles without a history (prior draws only) are not timed.
 """
 
 from __future__ import annotations
