@@ -309,26 +309,26 @@ def _quick(tmp_path, name, *extra):
     return json.loads(out.read_text())
 
 
-def test_quick_depth_and_problem_priors_side_by_side(tmp_path):
-    report = _quick(tmp_path, "both.json", "--prior", "depth", "problem", "--workers", "2")
+def test_quick_generic_and_problem_priors_side_by_side(tmp_path):
+    report = _quick(tmp_path, "both.json", "--prior", "generic", "problem", "--workers", "2")
     rows = {(r["prior"], r["mode"]): r for r in report["results"]}
     assert set(rows) == {
-        (p, m) for p in ("depth", "problem") for m in ("compliant", "non-compliant")
+        (p, m) for p in ("generic", "problem") for m in ("compliant", "non-compliant")
     }
     assert all(r["instances"] == 3 and r["errors"] == 0 for r in rows.values())
     truths = report["truths"]["notch"]
     errors = [tuple(t["calibration_error"]) for t in truths]
     assert len(set(errors)) == 3 and all(len(e) == 6 for e in errors)  # drawn per truth
-    assert all(t["depth_prior_vertices"] >= 2 for t in truths)
+    assert all(t["generic_prior_vertices"] >= 2 for t in truths)
     # the same seeds in one process give the same episodes and the same drawn errors, also
     # with the sampler's exit search split over 2 threads
     again = _quick(
-        tmp_path, "depth.json", "--prior", "depth", "--mode", "non-compliant",
+        tmp_path, "generic.json", "--prior", "generic", "--mode", "non-compliant",
         "--sampler-threads", "2",
     )  # fmt: skip
     assert report["sampler_threads"] == 1 and again["sampler_threads"] == 2
     assert [tuple(t["calibration_error"]) for t in again["truths"]["notch"]] == errors
-    key = ("depth", "non-compliant")
+    key = ("generic", "non-compliant")
     strip = [{k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in rows[key]["episodes"]]
     assert strip == [
         {k: e[k] for k in ("outcome", "cycles", "p_dock")} for e in again["results"][0]["episodes"]

@@ -1,6 +1,8 @@
-"""``bench docking --prior learned``: the depth prior's image, conditioned on the terrain class
-library (``perception.learned_prior``)."""
+"""``bench docking --prior depth``: the mock camera's image conditioned on the terrain class
+library (``perception.learned_prior``), the generic depth prior (``--prior generic``) out of
+library."""
 
+import argparse
 import json
 from pathlib import Path
 
@@ -19,7 +21,7 @@ SHIPPED = REPO / "config" / "terrain_classes.npz"
 CONFIG = REPO / "config" / "perception_mock.yaml"
 
 
-def test_the_learned_prior_sees_the_depth_priors_image():
+def test_the_learned_prior_sees_the_generic_priors_image():
     """Same seed: the same calibration error is drawn (then the same depth noise)."""
     config = PerceptionConfig.load(CONFIG)
     truth = problems.get("notch").sample_ground_truth(np.random.default_rng(1))
@@ -30,8 +32,8 @@ def test_the_learned_prior_sees_the_depth_priors_image():
     assert np.array_equal(error, seen.calibration_error)
 
 
-def test_out_of_library_the_learned_row_gets_the_depth_rows_prior():
-    """A library without the truth's class: the gate falls back to exactly the depth prior."""
+def test_out_of_library_the_depth_row_gets_the_generic_rows_prior():
+    """A library without the truth's class: the gate falls back to exactly the generic prior."""
     config = PerceptionConfig.load(CONFIG)
     truth = problems.get("notch").sample_ground_truth(np.random.default_rng(1))
     seen = depth_prior(truth, config, np.random.default_rng(7))
@@ -45,19 +47,30 @@ def test_out_of_library_the_learned_row_gets_the_depth_rows_prior():
     assert chosen.model == "learned" and chosen.class_name == "notch"
 
 
-def test_bench_docking_quick_with_the_learned_prior(tmp_path):
-    out = tmp_path / "learned.json"
-    argv = ["docking", "--quick", "--prior", "learned", "--strategies", "ours"]
+def test_the_default_priors_are_the_hand_made_and_the_robots():
+    """``depth`` is the class library's prior; ``learned``, its earlier name, still selects it;
+    the generic prior runs only when asked."""
+    parser = argparse.ArgumentParser()
+    docking.add_arguments(parser)
+    assert parser.parse_args([]).prior == ["problem", "depth"]
+    assert parser.parse_args(["--prior", "learned", "generic"]).prior == ["depth", "generic"]
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--prior", "camera"])
+
+
+def test_bench_docking_quick_with_the_depth_prior(tmp_path):
+    out = tmp_path / "depth.json"
+    argv = ["docking", "--quick", "--prior", "depth", "learned", "--strategies", "ours"]
     assert bench.main([*argv, "--problems", "sloper", "notch", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert Path(report["terrain_classes"]).resolve() == SHIPPED.resolve()
     assert report["min_inlier_fraction"] == TerrainLibrary.load(SHIPPED).gates
     models = {n: [t["learned_model"] for t in ts] for n, ts in report["truths"].items()}
     assert report["learned_fallbacks"] == {n: m.count("generic") for n, m in models.items()}
-    assert {r["prior"] for r in report["results"]} == {"learned"}
+    assert [r["prior"] for r in report["results"]] == ["depth"] * 4  # 2 problems x 2 modes, once
     assert all(r["errors"] == 0 for r in report["results"])
     calibration = {(r["prior"], r["mode"]) for r in report["attempt_calibration"]}
-    assert calibration == {("learned", m) for m in docking.MODES}
+    assert calibration == {("depth", m) for m in docking.MODES}
     for name, truths in report["truths"].items():
         assert [t["learned_class"] for t in truths] == [name] * 3
         assert all(len(t["calibration_error"]) == 6 for t in truths)
@@ -67,9 +80,9 @@ def test_bench_docking_refuses_a_bad_library(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"garbage")
     with pytest.raises(SystemExit, match=r"--terrain-classes: .*not a terrain class library"):
-        bench.main(["docking", "--quick", "--prior", "learned", "--terrain-classes", str(bad)])
+        bench.main(["docking", "--quick", "--prior", "depth", "--terrain-classes", str(bad)])
     with pytest.raises(SystemExit, match=r"--min-inlier-fraction: .*\[0, 1\]"):
-        bench.main(["docking", "--quick", "--prior", "learned", "--min-inlier-fraction", "1.5"])
+        bench.main(["docking", "--quick", "--prior", "depth", "--min-inlier-fraction", "1.5"])
 
 
 def test_bench_docking_loads_the_compiled_kernels_before_any_timed_cycle(tmp_path, monkeypatch):

@@ -67,7 +67,7 @@ def test_bad_arguments_are_rejected(bad):
     assert exit_info.value.code == 2
 
 
-@pytest.mark.parametrize("source", ["depth", "learned", "problem"])
+@pytest.mark.parametrize("source", ["depth", "generic", "problem", "learned"])
 def test_each_prior_source_of_the_launch_file_is_offered(source):
     """Every prior_source perception takes (``launch/tactile_dock.launch.xml``) can be asked."""
     parser = argparse.ArgumentParser()

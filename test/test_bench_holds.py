@@ -5,8 +5,31 @@ import json
 import numpy as np
 import pytest
 
+from tactile_dock_ros.core import problems
 from tactile_dock_ros.tools import bench
 from tactile_dock_ros.tools.bench import holds
+
+
+def test_holds_are_the_robots_prior_unless_generic_is_asked(tmp_path):
+    """--prior depth (the default) ranks the priors perception publishes: the class library on
+    the image; --prior generic the generic depth prior of the same image."""
+    argv = ["holds", "--instances", "2", "--repeats", "1", "--problems", "notch", "--samples", "20"]
+    reports = {}
+    for prior in ("depth", "generic"):
+        out = tmp_path / f"{prior}.json"
+        assert bench.main([*argv, "--prior", prior, "--json", str(out)]) == 0
+        reports[prior] = json.loads(out.read_text())
+    depth, generic = reports["depth"], reports["generic"]
+    assert depth["prior"] == "depth" and generic["prior"] == "generic"
+    assert generic["terrain_classes"] is None and depth["terrain_classes"].endswith(".npz")
+    notch_vertices = problems.get("notch").prior.n_vertices
+    for hold in depth["holds"]:
+        assert (hold["model"] == "learned") == (hold["vertices"] == notch_vertices)
+    assert depth["generic_fallbacks"] == sum(h["model"] == "generic" for h in depth["holds"])
+    assert depth["generic_fallbacks"] < 2  # notch's own test truths: its class explains them
+    assert all(h["model"] == "generic" for h in generic["holds"])
+    assert generic["generic_fallbacks"] == 2
+    assert [h["feasible"] for h in depth["holds"]] == [h["feasible"] for h in generic["holds"]]
 
 
 def test_holds_bench_small(tmp_path):

@@ -128,19 +128,19 @@ def test_sampler_runs_take_the_asked_method_and_start(tmp_path, monkeypatch):
     assert runs["mass_rounds_each"] == [c.mass_rounds for c in reports[-2:]]
 
 
-def test_the_learned_prior_is_checked_against_rejection(tmp_path):
-    """--prior learned: the robot's prior (the mock image of a training truth conditioned on the
-    shipped class library). Notch truth 11 of base seed 1 is 0.27 degrees from holding, so its
-    first attempt fails whatever the sampler draws and cycle 1 has a history (9 rows measured
-    2026-11-29; ~7 % of prior draws fit it). The sampler's posterior is the exact one there:
-    its means and the plan's P_dock agree with rejection to within the draws' noise."""
+def test_the_depth_prior_is_checked_against_rejection(tmp_path):
+    """--prior depth (the default): the robot's prior (the mock image of a training truth
+    conditioned on the shipped class library). Notch truth 11 of base seed 1 is 0.27 degrees from
+    holding, so its first attempt fails whatever the sampler draws and cycle 1 has a history (9
+    rows measured 2026-11-29; ~7 % of prior draws fit it). The sampler's posterior is the exact
+    one there: its means and the plan's P_dock agree with rejection to within the draws' noise."""
     out = tmp_path / "posterior.json"
     argv = ["posterior", "--seed", "1", "--problem", "notch", "--instance", "11"]
-    argv += ["--prior", "learned", "--max-cycles", "2", "--cycles", "0", "1"]
+    argv += ["--max-cycles", "2", "--cycles", "0", "1"]
     argv += ["--reference", "rejection", "--particles", "1000", "--sampler-runs", "4"]
     assert bench.main([*argv, "--json", str(out)]) == 0
     report = json.loads(out.read_text())
-    assert report["prior"] == "learned" and report["learned_model"] == "learned"
+    assert report["prior"] == "depth" and report["learned_model"] == "learned"
     assert report["learned_class"] == "notch" and report["feasible"] is False
     first, second = report["cycles"]
     assert first["history_rows"] == 0 and second["history_rows"] > 0
@@ -159,7 +159,7 @@ def test_the_learned_prior_is_checked_against_rejection(tmp_path):
 
 
 def test_a_missing_class_library_is_refused_by_name():
-    argv = ["posterior", "--problem", "notch", "--prior", "learned", "--max-cycles", "1"]
+    argv = ["posterior", "--problem", "notch", "--prior", "depth", "--max-cycles", "1"]
     with pytest.raises(SystemExit, match="--terrain-classes"):
         bench.main([*argv, "--terrain-classes", "/nonexistent/classes.npz"])
 

@@ -86,7 +86,7 @@ def test_executor_docks_on_the_mock_floor_and_respects_its_limits(floor_bringup)
     assert speeds and max(speeds) <= limits["max_speed"] + 1e-9
 
 
-@pytest.mark.parametrize("prior_source", ["depth", "learned"])
+@pytest.mark.parametrize("prior_source", ["depth", "generic"])
 def test_perception_builds_a_prior_from_the_mock_camera(tmp_path, prior_source):
     arguments = {"profile": "mock", "problem": "notch", "seed": "2", "prior_source": prior_source}
     priors = []
@@ -101,7 +101,7 @@ def test_perception_builds_a_prior_from_the_mock_camera(tmp_path, prior_source):
     assert prior.n_vertices >= 10 and prior.n_basis > 0
     learned = TerrainLibrary.load(REPO_ROOT / "config" / "terrain_classes.npz").get("notch")
     log = (tmp_path / "perception.log").read_text()
-    if prior_source == "learned":  # the notch class's vertices, conditioned on the image
+    if prior_source == "depth":  # the notch class's vertices, conditioned on the image
         assert prior.n_vertices == learned.n_vertices and "learned prior: class notch" in log
     else:
         assert prior.n_vertices != learned.n_vertices and "learned" not in log

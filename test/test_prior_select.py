@@ -151,11 +151,11 @@ def test_a_one_class_library_gets_a_gate_from_its_own_scans():
 
 
 def _perception(tmp_path, library: TerrainLibrary | None = None, **arguments):
-    """The perception node of the mock launch with ``prior_source: learned``."""
+    """The perception node of the mock launch (``prior_source: depth`` unless given)."""
     if library is not None:
         library.save(tmp_path / "classes.npz")
         arguments["terrain_classes"] = str(tmp_path / "classes.npz")
-    spec = launch_nodes("mock", prior_source="learned", **arguments)["perception"]
+    spec = launch_nodes("mock", **{"prior_source": "depth", **arguments})["perception"]
     return node_from_launch(spec, tmp_path)
 
 
@@ -195,13 +195,29 @@ def test_perception_node_falls_back_out_of_library(tmp_path):
 
 @pytest.mark.parametrize(
     "arguments, message",
-    [({"terrain_classes": ""}, "terrain_classes is required"),
-     ({"terrain_classes": "/no/such/classes.npz"}, "terrain_classes"),
+    [({"terrain_classes": "/no/such/classes.npz"}, "terrain_classes"),
      ({"terrain_classes": str(REPO / "config" / "mock.yaml")}, "not a terrain class library")],
 )  # fmt: skip
 def test_perception_node_refuses_a_bad_library(tmp_path, arguments, message):
     with pytest.raises(ValueError, match=message), _perception(tmp_path, **arguments):
         pass
+
+
+@pytest.mark.parametrize(
+    "arguments, classes",
+    [({"terrain_classes": ""}, False),  # no library: the generic prior (with a warning)
+     ({"prior_source": "generic"}, False),
+     ({"prior_source": "learned"}, True)],  # the earlier name of depth
+)  # fmt: skip
+def test_perception_node_uses_the_library_only_for_the_depth_source(tmp_path, arguments, classes):
+    with _perception(tmp_path, **arguments) as (node, _):
+        statuses = _capture(node, _image("three_ledges", 1))
+        hold = node.holds.get(1)
+    assert (node.library is not None) == classes
+    values = {kv.key: kv.value for kv in statuses[-1].values}
+    assert (values.get("model") == "learned") == classes
+    class_vertices = problems.get("three_ledges").prior.n_vertices
+    assert hold is not None and (hold.prior.n_vertices == class_vertices) == classes
 
 
 def test_perception_node_needs_a_gate_for_an_ungated_library(tmp_path):

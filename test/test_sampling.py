@@ -454,7 +454,7 @@ def test_problem2_means_match_rejection_over_40_seeds(
 
 
 def _learned_case(problem: str, instance: int, cycle: int, max_draws: int):
-    """The robot's prior (``prior_source: learned``: a training truth's mock image, base seed 1,
+    """The robot's prior (``prior_source: depth``: a training truth's mock image, base seed 1,
     conditioned on the shipped class library), the history of one of its episodes at ``cycle``
     (the rows the sampler kept), and a rejection reference of 6000 draws: the problem with that
     prior, the history, the reference's vertex means and std."""
@@ -462,7 +462,7 @@ def _learned_case(problem: str, instance: int, cycle: int, max_draws: int):
     parser.add_argument("--seed", type=int)
     bench_posterior.add_arguments(parser)
     args = parser.parse_args(
-        ["--seed", "1", "--problem", problem, "--instance", str(instance), "--prior", "learned"]
+        ["--seed", "1", "--problem", problem, "--instance", str(instance), "--prior", "depth"]
     )
     truth, shape, views, _ = bench_posterior.replay_episode(args, cycle + 1)
     assert truth["learned_model"] == "learned"

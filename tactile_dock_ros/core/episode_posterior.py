@@ -18,13 +18,13 @@ usual sample.
 Decision: top up only below half of ``n_samples``, with at most one more round of
 ``n_samples`` draws (``TOP_UP_DRAWS`` 2). Measured side by side with the code before on the
 training truths (``bench docking --split train --strategies ours --mode compliant
-non-compliant``, 2026-11-29). Learned prior (``--prior learned --instances 40 --episode-seeds
+non-compliant``, 2026-11-29). Learned prior (``--prior depth --instances 40 --episode-seeds
 9``): most slides rule out a few draws (177 of 1028 three_ledges cycles rejected any, 6 more
 than 50 of 100); topping every one of them up to 100 took 1.27x the run's summed cycle time
 for the same outcome of every episode. Below half only (``--problems notch three_ledges
 --instances 100``, 3600 episodes), 52 episodes changed and the summed time did not (233 ->
 236 s): every feasible episode docked in both, one clearly infeasible one ran to the cap
-instead of giving up. Generic depth prior (``--prior depth --episode-seeds 3``): sloper's
+instead of giving up. Generic depth prior (``--prior generic --episode-seeds 3``): sloper's
 slides rule out most draws (130 of 436 cycles more than 50, many ~95 of 100); a budget of 4 x
 ``n_samples`` took 1.41x the summed time and 7 cycles over 1 s (0 before), 2 x took 1.25x and
 2 (in an episode that took another course, at a cycle without a top-up), with the same
@@ -43,7 +43,7 @@ passed draw lets an edge hold (a vertex only traps a compliant slide), the chain
 the draws and the history's rows (HMC bounces, the slides' check, the planner's obstacle
 region), so the draws are capped at ``HOLD_ROW_DRAWS`` / rows: 3000 up to 3 rows (truth 112's
 cycle 1 had 3), 1000 at 10, none beyond 100 rows. Measured side by side on the
-training truths (``bench docking --split train --prior learned --strategies ours --mode
+training truths (``bench docking --split train --prior depth --strategies ours --mode
 compliant non-compliant --instances 120 --episode-seeds 3``, base seed 0, 2026-11-29, code
 before / cap 30,000 / cap 10,000): every feasible episode docked and 312 of 312 clearly
 infeasible ones gave up in all three, ECE 0.043 / 0.040, 0.042 / 0.039, 0.042 / 0.040

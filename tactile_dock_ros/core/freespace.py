@@ -56,7 +56,7 @@ def solid_region(mean_vertices: np.ndarray, closed: bool):
     solid is on the left of the walking direction). Closing by the chord from the last to the
     first vertex left the rock under a depth slice free: the slice ends at the top of a hold
     (its back is unseen), the chord cuts through the hold, and shortest paths went over the
-    top, down the hidden back and in under the seen face (``bench docking --prior depth``,
+    top, down the hidden back and in under the seen face (``bench docking --prior generic``,
     notch truths 0 and 8). The problems' profiles end in walls going down, so their solid
     only grows below them. Crossing extensions make a self-intersecting ring; its valid
     parts are kept.

@@ -753,7 +753,7 @@ def _seed(
        to nothing at up to 0.35 s each (2026-11-29: a depth-prior cycle of 276 rows, sloper
        test truth 0, non-compliant, spent 2.8 of its 3.4 s in 8 such restarts for a third
        distinct seed). Side by side on the training truths (``bench docking --split train
-       --prior depth --strategies ours --mode compliant non-compliant --episode-seeds 3``):
+       --prior generic --strategies ours --mode compliant non-compliant --episode-seeds 3``):
        every episode alike, slowest cycle 1.16 -> 1.13 s, summed 141 -> 146 s (noise); then
        on the test truths (``--split test --episode-seeds 8``) every episode alike, slowest
        cycle 3.30 -> 1.67 s.
@@ -1162,7 +1162,7 @@ def sample_posterior(
     ``seed_round_restarts`` None (the default) is the one-call search of before, for callers
     that do not call again (a one-off posterior, evaluations, checks); the episode loops
     (``explore.run_episode``, the inference node) pass ``SEED_ROUND_RESTARTS``. Measured on
-    ``bench docking --prior depth --split train --problems sloper`` (120 episodes, side by side
+    ``bench docking --prior generic --split train --problems sloper`` (120 episodes, side by side
     with the code before): slowest cycle 5.65 -> 1.41 s, median 0.136 -> 0.133 s, the same
     docks and give-ups but one more (docs/inference.md, "Inconsistent history").
     Warm start: ``init_z`` (N0, m), e.g. the ``z`` of the posterior before the newest

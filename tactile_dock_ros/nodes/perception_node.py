@@ -1,21 +1,23 @@
 """perception: the terrain prior (ShapeDistribution on ``terrain_prior``, latched), the captured
 holds and their first-look evaluation (``/evaluate_hold``).
 
-``prior_source: depth`` builds the prior from a depth Image + CameraInfo (``depth/image``,
-``depth/camera_info``, sensor-data QoS) with the ROS-free ``perception`` package and the
-settings file ``perception_config`` (camera extrinsic and its covariance, depth noise, slicing,
-occlusion), on the first valid frame (``capture: first_frame``) or on the next frame after each
-``~/capture`` request (std_srvs/Trigger; ``capture: on_request``). A frame the perception
-cannot use is logged and skipped. ``prior_source: learned`` conditions the learned terrain
-classes of ``terrain_classes`` (``tools.fit_terrain_classes``) on the same image
-(``perception.prior_select``): the best class's posterior when it explains at least
+``prior_source: depth`` (the default, the robot's prior) builds the prior from a depth Image +
+CameraInfo (``depth/image``, ``depth/camera_info``, sensor-data QoS) with the ROS-free
+``perception`` package and the settings file ``perception_config`` (camera extrinsic and its
+covariance, depth noise, slicing, occlusion), on the first valid frame (``capture:
+first_frame``) or on the next frame after each ``~/capture`` request (std_srvs/Trigger;
+``capture: on_request``). A frame the perception cannot use is logged and skipped. The image
+conditions the terrain classes of ``terrain_classes`` (``tools.fit_terrain_classes``,
+``perception.prior_select``): the best class's posterior when it explains at least
 ``min_inlier_fraction`` of the slice (-1: the class's own gate, fitted on training scans),
-else, out of library, the generic depth prior of that image with a warning.
-``prior_source: problem`` publishes the prior of a benchmark problem instead (fast and exact;
-the mock terrain is drawn from that same prior). RViz markers on ``~/markers``; ``~/status``
-(DiagnosticStatus, latched) carries the compute time and, for ``learned``, the model used
-(``learned`` / ``generic``), the class, its inlier fraction, the gate and each class's log
-evidence.
+else, out of library, the generic depth prior of that image with a warning. Without
+``terrain_classes`` (or with ``prior_source: generic``) every image gets the generic depth prior
+(paper Sec. III-A1), whose P_dock are overconfident (docs/benchmarks.md); ``learned`` is the
+earlier name of ``depth``. ``prior_source: problem`` publishes the prior of a benchmark problem
+instead (fast and exact; the mock terrain is drawn from that same prior). RViz markers on
+``~/markers``; ``~/status`` (DiagnosticStatus, latched) carries the compute time and, with a
+class library, the model used (``learned`` / ``generic``), the class, its inlier fraction, the
+gate and each class's log evidence.
 
 Decision: ``ShapeDistribution`` is unchanged for the learned prior (its posterior is the same
 Gaussian over vertices, which the message carries exactly); the class and the gate's decision
@@ -72,7 +74,14 @@ from tactile_dock_ros.nodes.common import (
 from tactile_dock_ros.nodes.params import Param, declare
 from tactile_dock_ros.perception.config import PerceptionConfig, PerceptionError
 from tactile_dock_ros.perception.learned_prior import TerrainLibrary
-from tactile_dock_ros.perception.prior_select import SelectedPrior, gate_thresholds, select_prior
+from tactile_dock_ros.perception.prior_select import (
+    PRIOR_SOURCES,
+    SOURCE_ALIASES,
+    SelectedPrior,
+    gate_thresholds,
+    prior_source,
+    select_prior,
+)
 from tactile_dock_ros.perception.terrain_prior import perceive
 from tactile_dock_ros.srv import EvaluateHold
 
@@ -82,8 +91,9 @@ PARAMS = [
     Param(
         "prior_source",
         "depth",
-        "where the prior comes from",
-        choices=("depth", "learned", "problem"),
+        "where the prior comes from: depth (terrain_classes on the depth image), generic (the "
+        "generic depth prior), problem (a benchmark problem's); learned: the earlier name of depth",
+        choices=(*PRIOR_SOURCES, *SOURCE_ALIASES),
     ),
     Param(
         "problem",
@@ -91,11 +101,12 @@ PARAMS = [
         "benchmark problem (prior_source: problem)",
         choices=tuple(problems.names()),
     ),
-    Param("perception_config", "", "perception settings YAML (prior_source: depth, learned)"),
+    Param("perception_config", "", "perception settings YAML (prior_source: depth, generic)"),
     Param(
         "terrain_classes",
         "",
-        "terrain class library .npz of tools.fit_terrain_classes (prior_source: learned)",
+        "terrain class library .npz of tools.fit_terrain_classes (prior_source: depth; empty: "
+        "the generic depth prior)",
     ),
     Param(
         "min_inlier_fraction",
@@ -145,12 +156,13 @@ class PerceptionNode(Node):
         subscribe(self, PoseStamped, "tool_pose", self.on_pose, qos.SENSOR, base)
         self.info = None
         self.pending = self.p.capture == "first_frame"
-        if self.p.prior_source == "problem":
+        self.source = prior_source(self.p.prior_source)
+        if self.source == "problem":
             with Stopwatch() as watch:
                 prior = problems.get(self.p.problem).prior
             self.publish_prior(prior, "problem " + self.p.problem, watch.seconds)
             return
-        source = self.p.prior_source
+        source = self.source
         if not self.p.perception_config:
             raise ValueError(f"parameter perception_config is required for prior_source: {source}")
         try:
@@ -160,12 +172,18 @@ class PerceptionNode(Node):
         self.library = None
         fraction = self.p.min_inlier_fraction
         self.gate_override = None if fraction < 0 else fraction  # None: each class's own gate
-        if source == "learned":
+        if source == "depth" and self.p.terrain_classes:
             self.library, gates = load_library(self.p.terrain_classes, self.gate_override)
             listed = ", ".join(f"{name} {gate:.3f}" for name, gate in gates.items())
             self.get_logger().info(
-                f"learned prior: classes of {self.p.terrain_classes}, out-of-library gates "
+                f"depth prior: terrain classes of {self.p.terrain_classes}, out-of-library gates "
                 f"(fraction of slice bins) {listed}"
+            )
+        elif source == "depth":
+            self.get_logger().warning(
+                "depth prior without terrain_classes: every image gets the generic depth prior, "
+                "whose P_dock are overconfident; fit a class library of your wall "
+                "(tools.fit_terrain_classes, tools.refit_terrain_classes)"
             )
         camera = self.p.camera_frame_id or None
         subscribe(self, CameraInfo, "depth/camera_info", self.on_info, qos.SENSOR, camera)
@@ -173,7 +191,7 @@ class PerceptionNode(Node):
 
     def on_capture(self, request, response):
         hold = f"hold {self.holds.next_id}"  # the id the capture gets (captures go in turn)
-        if self.p.prior_source == "problem":
+        if self.source == "problem":
             self.publish_prior(problems.get(self.p.problem).prior, "problem " + self.p.problem)
             response.success, response.message = True, f"{hold}: prior republished"
         else:
@@ -300,10 +318,8 @@ class PerceptionNode(Node):
 def load_library(
     path: str, min_inlier_fraction: float | None
 ) -> tuple[TerrainLibrary, dict[str, float]]:
-    """The class library and the gate to apply per class (``min_inlier_fraction`` None: each
-    class's own); ValueError naming the parameter when either is unusable."""
-    if not path:
-        raise ValueError("parameter terrain_classes is required for prior_source: learned")
+    """The class library at ``path`` and the gate to apply per class (``min_inlier_fraction``
+    None: each class's own); ValueError naming the parameter when either is unusable."""
     try:
         library = TerrainLibrary.load(path)
     except (OSError, ValueError) as err:

@@ -21,6 +21,11 @@ docs/perception.md): the classes' tails differ (in-library 1 % quantiles sloper 
 0.972, three_ledges 0.991), and where one class's out-of-library scans reach its own tail a
 pooled threshold is either loose for the others or sends that class's images to the generic
 prior.
+
+Names (perception's ``prior_source``, ``bench docking --prior``): ``depth`` is this selection,
+the robot's camera prior; ``generic`` is the generic depth prior alone (no terrain model: its
+P_dock are overconfident, docs/benchmarks.md); ``learned`` is accepted as the earlier name of
+``depth``.
 """
 
 from __future__ import annotations
@@ -38,6 +43,13 @@ from .terrain_prior import perceive
 IN_LIBRARY_QUANTILE = 0.01
 OUT_OF_LIBRARY_QUANTILE = 0.99
 SINGLE_CLASS_MARGIN = 0.02
+PRIOR_SOURCES = ("depth", "generic", "problem")  # problem: a benchmark problem's hand-made prior
+SOURCE_ALIASES = {"learned": "depth"}  # earlier names
+
+
+def prior_source(name: str) -> str:
+    """``name`` with an earlier name (``SOURCE_ALIASES``) replaced by the current one."""
+    return SOURCE_ALIASES.get(name, name)
 
 
 @dataclass(frozen=True)

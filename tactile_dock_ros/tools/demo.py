@@ -19,6 +19,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from tactile_dock_ros.perception.prior_select import PRIOR_SOURCES, SOURCE_ALIASES
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -27,8 +29,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--prior-source",
         default="depth",
-        choices=("depth", "learned", "problem"),
-        help="perception's prior_source (learned: the shipped terrain classes on the depth image)",
+        choices=(*PRIOR_SOURCES, *SOURCE_ALIASES),
+        help="perception's prior_source: depth (the shipped terrain classes conditioned on the "
+        "depth image), generic (the generic depth prior alone) or problem (the hand-made prior)",
     )
     parser.add_argument("--png", type=Path, default=Path("episode.png"))
     parser.add_argument("--log-dir", type=Path, default=None, help="node logs (default: temp)")

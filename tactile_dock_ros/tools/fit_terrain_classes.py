@@ -168,7 +168,7 @@ def _parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[0],
         epilog="Truths come from the train split only; the library loads with "
         "perception.learned_prior.TerrainLibrary.load and is used by "
-        "'bench docking --prior learned --terrain-classes FILE'.",
+        "'bench docking --prior depth --terrain-classes FILE'.",
     )
     parser.add_argument("--out", type=Path, required=True, help="library file to write (.npz)")
     parser.add_argument(

@@ -18,7 +18,7 @@ scans it explains best, leaving out scans whose best class explains less than
 ``--min-inlier-fraction`` of the slice (walls no class describes). The out-of-library gates are
 then refitted on the same scans (``prior_select.inlier_samples``: each scan with the whole
 refitted library and without its class; ``prior_select.fit_thresholds``, one per class) and
-stored in ``--out``, which perception loads with ``prior_source: learned terrain_classes:=...``.
+stored in ``--out``, which perception loads with ``prior_source: depth terrain_classes:=...``.
 Printed: the scans used and skipped, per EM step the scans assigned per class and their mean log
 evidence per scan (the library of the largest is kept), and per class the gate's two samples and
 the gate.

@@ -6,18 +6,18 @@ same truths whatever subset of problems runs) on the truths of ``--split`` (``to
 planner was tuned on, as before the option, and anything tuned must use them; the JSON records
 the split). Every truth runs one episode per strategy, per prior and per mode:
 
-- prior ``problem``: the problem's hand-made prior; ``depth``: the prior the robot gets, the
-  truth rendered by the mock profile's depth camera (``--perception-config``, 320x240, focal
-  262.5 px) from a pose displaced by a calibration error drawn per truth from the configured
-  extrinsic covariance (seeded), then perceived (``perception.mock_camera.depth_prior``);
-  ``learned`` (not run unless asked): what perception's ``prior_source: learned`` publishes for
-  the SAME depth image (same seeds, same draws): the terrain class library ``--terrain-classes``
-  (default: the shipped config/terrain_classes.npz, fitted on train truths by
-  ``tools.fit_terrain_classes``) conditioned on it, behind the out-of-library gate
-  (``perception.prior_select``, ``--min-inlier-fraction``, default each class's), else the
-  generic depth prior of that image (then exactly the ``depth`` row's prior); the truth records
-  carry the model used, the best class, every class's log-evidence and the inlier fraction, the
-  JSON the library path, the gate per class and the fallback count;
+- prior ``problem``: the problem's hand-made prior; ``depth``: the prior the robot gets, what
+  perception's ``prior_source: depth`` publishes for the truth rendered by the mock profile's
+  depth camera (``--perception-config``, 320x240, focal 262.5 px) from a pose displaced by a
+  calibration error drawn per truth from the configured extrinsic covariance (seeded): the
+  terrain class library ``--terrain-classes`` (default: the shipped config/terrain_classes.npz,
+  fitted on train truths by ``tools.fit_terrain_classes``) conditioned on the image, behind the
+  out-of-library gate (``perception.prior_select``, ``--min-inlier-fraction``, default each
+  class's), else the generic depth prior of that image; the truth records carry the model used,
+  the best class, every class's log-evidence and the inlier fraction, the JSON the library path,
+  the gate per class and the fallback count; ``generic`` (not run unless asked): the generic
+  depth prior of the SAME image (same seeds, same draws; ``perception.mock_camera.depth_prior``),
+  the out-of-library fallback alone. ``learned`` is taken as the earlier name of ``depth``;
 - mode ``compliant`` (ideal compliance: the tool slides along the surface) or ``non-compliant``
   (the mock profile's planner setting, ``compliant: false`` in config/mock.yaml; with its
   executor's ``slide_on_slip``, ``--slide-on-slip``, a slip slides on for evidence only,
@@ -77,13 +77,19 @@ from ...core.shape import GaussianShape
 from ...perception.config import PerceptionConfig, PerceptionError
 from ...perception.learned_prior import TerrainLibrary
 from ...perception.mock_camera import MockCamera, depth_prior, draw_calibration_error
-from ...perception.prior_select import SelectedPrior, gate_thresholds, select_prior
+from ...perception.prior_select import (
+    PRIOR_SOURCES,
+    SelectedPrior,
+    gate_thresholds,
+    prior_source,
+    select_prior,
+)
 from .. import package_files
 from . import calibration
 from .splits import add_split_argument, split_seed
 
-PRIORS = ("problem", "depth")  # the default priors (``learned`` runs when asked)
-DOCKING_PRIORS = (*PRIORS, "learned")  # learned: only when asked
+PRIORS = ("problem", "depth")  # the default priors (``generic`` runs when asked)
+DOCKING_PRIORS = PRIOR_SOURCES  # perception's prior_source values
 TERRAIN_CLASSES = Path("config/terrain_classes.npz")
 CLEARLY_INFEASIBLE_DEG = 1.0  # holding margin from which an infeasible truth is clearly so
 MODES = ("compliant", "non-compliant")
@@ -172,19 +178,19 @@ def add_slide_argument(parser) -> None:
 
 
 def add_library_arguments(parser) -> None:
-    """The learned prior's class library and gate (``--prior learned``)."""
+    """The depth prior's class library and gate (``--prior depth``)."""
     parser.add_argument(
         "--terrain-classes",
         type=Path,
         default=TERRAIN_CLASSES,
-        help="terrain class library of the learned prior (tools.fit_terrain_classes; default: "
+        help="terrain class library of the depth prior (tools.fit_terrain_classes; default: "
         "the shipped one; a relative path missing here is taken from the package share)",
     )
     parser.add_argument(
         "--min-inlier-fraction",
         type=float,
         default=None,
-        help="out-of-library gate of the learned prior for every class, in [0, 1] (0: never "
+        help="out-of-library gate of the depth prior for every class, in [0, 1] (0: never "
         "falls back; default: each class's fitted gate)",
     )
 
@@ -214,10 +220,12 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--prior",
         nargs="+",
+        type=prior_source,
         default=list(PRIORS),
         choices=DOCKING_PRIORS,
-        help="problem: the hand-made prior; depth: perceived from the mock camera; learned: the "
-        "same image conditioned on the terrain class library (--terrain-classes)",
+        help="problem: the hand-made prior; depth: the mock camera's image conditioned on the "
+        "terrain class library (--terrain-classes), the robot's prior; generic: the generic depth "
+        "prior of the same image (learned: the earlier name of depth)",
     )
     add_library_arguments(parser)
     parser.add_argument(
@@ -371,15 +379,15 @@ def _truths(
     args,
     name: str,
     instances: int,
-    config: PerceptionConfig | None,
+    generic_config: PerceptionConfig | None,
     split: str = "train",
     library: TerrainLibrary | None = None,
-    learned_config: PerceptionConfig | None = None,
+    depth_config: PerceptionConfig | None = None,
 ) -> list[dict]:
-    """Per instance: truth, feasibility and holding margin per mode and, when asked, its depth
-    prior (``config``) and its learned prior (``library`` with ``learned_config``: the image the
-    depth prior sees with that config); drawn from ``split``'s seeds (``splits.split_seed``;
-    train: ``[seed, problem, i]``)."""
+    """Per instance: truth, feasibility and holding margin per mode and, when asked, its generic
+    depth prior (``generic_config``) and its depth prior (``library`` with ``depth_config``: the
+    same image conditioned on the class library); drawn from ``split``'s seeds
+    (``splits.split_seed``; train: ``[seed, problem, i]``)."""
     p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
     base = split_seed(split, args.seed)
     problem = _problem(name)
@@ -395,27 +403,32 @@ def _truths(
             "holding_margin_deg": {mode: _holding_margin(problem, truth, mode) for mode in MODES},
             "seed": (*base, p_index, i, 1),
         }
-        if config is not None:
+        rng_seed = [*base, p_index, i, 2]  # the same image for both
+        if generic_config is not None:
             try:
-                seen = depth_prior(truth, config, np.random.default_rng([*base, p_index, i, 2]))
-                entry["depth"] = seen.prior
+                seen = depth_prior(truth, generic_config, np.random.default_rng(rng_seed))
+                entry["generic"] = seen.prior
                 entry["calibration_error"] = seen.calibration_error.tolist()
             except PerceptionError as err:
-                entry["depth"], entry["perception_error"] = None, str(err)
+                entry["generic"], entry["generic_perception_error"] = None, str(err)
         if library is not None:
             try:
-                rng = np.random.default_rng([*base, p_index, i, 2])
                 chosen, error = learned_prior(
-                    truth, learned_config, rng, library, None, args.min_inlier_fraction
+                    truth,
+                    depth_config,
+                    np.random.default_rng(rng_seed),
+                    library,
+                    None,
+                    args.min_inlier_fraction,
                 )
-                entry["learned"] = chosen.prior
+                entry["depth"] = chosen.prior
                 entry.setdefault("calibration_error", error.tolist())
                 entry["learned_model"] = chosen.model
                 entry["learned_class"] = chosen.learned.name
                 entry["learned_log_evidence"] = chosen.learned.log_evidence
                 entry["learned_inlier_fraction"] = chosen.learned.inlier_fraction
             except PerceptionError as err:
-                entry["learned"], entry["learned_perception_error"] = None, str(err)
+                entry["depth"], entry["perception_error"] = None, str(err)
         out.append(entry)
     return out
 
@@ -432,11 +445,11 @@ def _truth_record(truth: dict) -> dict:
         "learned_class",
         "learned_log_evidence",
         "learned_inlier_fraction",
-        "learned_perception_error",
+        "generic_perception_error",
     )
     record = {k: v for k, v in truth.items() if k in keep}
-    if truth.get("depth") is not None:
-        record["depth_prior_vertices"] = truth["depth"].n_vertices
+    if truth.get("generic") is not None:
+        record["generic_prior_vertices"] = truth["generic"].n_vertices
     return record
 
 
@@ -770,15 +783,16 @@ def _indexed(item: tuple[int, _Task]) -> tuple[int, dict]:
 
 
 def run(args) -> dict:
+    args.prior = list(dict.fromkeys(args.prior))  # once each (``learned`` is ``depth``)
     instances, max_cycles = (3, 3) if args.quick else (args.instances, args.max_cycles)
     config, library, library_path, gates = None, None, None, None
-    if "depth" in args.prior or "learned" in args.prior:
+    if "depth" in args.prior or "generic" in args.prior:
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    if "learned" in args.prior:
+    if "depth" in args.prior:
         library, library_path, gates = load_library(args)
-    depth_config = config if "depth" in args.prior else None
+    generic_config = config if "generic" in args.prior else None
     truths = {
-        name: _truths(args, name, instances, depth_config, args.split, library, config)
+        name: _truths(args, name, instances, generic_config, args.split, library, config)
         for name in args.problems
     }
     keys = [
@@ -842,7 +856,7 @@ def run(args) -> dict:
             name: sum(t.get("learned_model") == "generic" for t in entries)
             for name, entries in truths.items()
         }
-        print(f"learned prior: generic fallbacks per problem {fallbacks} (gates {gates})")
+        print(f"depth prior: generic fallbacks per problem {fallbacks} (gates {gates})")
     calibration = attempt_calibration(results)
     print("\nP_dock of the executed attempts, problems pooled (bins: predicted/docked (attempts))")
     print(CALIBRATION_HEADER)

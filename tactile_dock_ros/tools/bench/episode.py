@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_dock_ros.core import planner, problems, simulate
+from tactile_dock_ros.perception.prior_select import PRIOR_SOURCES, SOURCE_ALIASES
 from tactile_dock_ros.tools import bringup
 
 STAGES = ("wall_s", "perception_s", "inference_s", "planning_s", "execution_s")
@@ -42,10 +43,10 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--prior-source",
         default="depth",
-        choices=("depth", "learned", "problem"),
-        help="perception's prior_source (launch argument): depth (the default), learned (the "
-        "shipped terrain classes on the same depth image, the launch file's terrain_classes) or "
-        "problem (the problem's hand-made prior)",
+        choices=(*PRIOR_SOURCES, *SOURCE_ALIASES),
+        help="perception's prior_source (launch argument): depth (the default: the launch file's "
+        "terrain_classes conditioned on the depth image), generic (the generic depth prior of "
+        "the same image) or problem (the problem's hand-made prior)",
     )
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per episode")
 

@@ -4,8 +4,11 @@ Held-out ground truths: ``--instances`` per problem drawn from a seed stream no 
 uses (``[seed, HELD_OUT, problem, i]``; ``bench docking --split train`` draws ``[seed, problem,
 i]``, the truths the planner was tuned on, and ``--split test`` the stream of
 ``tools.bench.splits``). Each is seen as the robot sees it, through the mock profile's depth
-camera (``config/perception_mock.yaml``, a calibration error drawn per truth,
-``perception.mock_camera.depth_prior``), and each resulting prior is one hold. For every hold
+camera (``config/perception_mock.yaml``, a calibration error drawn per truth), and the prior
+perception builds from that image is one hold: ``--prior depth`` (the default, perception's
+``prior_source: depth``: the terrain classes of ``--terrain-classes`` conditioned on the image,
+the generic prior out of library; ``docking.learned_prior``) or ``--prior generic`` (the
+generic depth prior alone, ``perception.mock_camera.depth_prior``; the same image). For every hold
 and mode (compliant, non-compliant) ``core.holds.evaluate_hold`` runs from the problem's start
 with the planner's settings (the mock profile's give-up threshold), ``--samples`` prior draws
 seeded with ``--eval-seed``: exactly what the perception node computes per hold.
@@ -34,9 +37,17 @@ import numpy as np
 from ...core import holds, problems, simulate
 from ...core.episode import PlannerConfig
 from ...perception.config import PerceptionConfig, PerceptionError
+from ...perception.learned_prior import TerrainLibrary
 from ...perception.mock_camera import depth_prior
+from ...perception.prior_select import prior_source
 from .. import package_files
-from .docking import MODES, add_episode_arguments
+from .docking import (
+    MODES,
+    add_episode_arguments,
+    add_library_arguments,
+    learned_prior,
+    load_library,
+)
 
 HELD_OUT = 7  # the tag of this suite's truth seeds (not drawn by any tuning benchmark)
 TARGET_SECONDS = 0.2
@@ -50,6 +61,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--mode", nargs="+", default=list(MODES), choices=MODES)
     parser.add_argument("--samples", type=int, default=100, help="prior draws per evaluation")
     parser.add_argument("--eval-seed", type=int, default=0, help="seed of each evaluation")
+    parser.add_argument(
+        "--prior",
+        type=prior_source,
+        default="depth",
+        choices=("depth", "generic"),
+        help="depth: the image conditioned on the terrain class library (perception's default); "
+        "generic: the generic depth prior of the same image (learned: the earlier name of depth)",
+    )
+    add_library_arguments(parser)
     add_episode_arguments(parser)
 
 
@@ -80,9 +100,9 @@ def auc_interval(scores, labels, rng: np.random.Generator) -> list[float] | None
     return [float(q) for q in np.percentile(values, [2.5, 97.5])]
 
 
-def _holds(args, name: str, config: PerceptionConfig) -> list[dict]:
-    """Per held-out truth of ``name``: its depth prior (None on a perception error) and
-    feasibility per mode."""
+def _holds(args, name: str, config: PerceptionConfig, library: TerrainLibrary | None) -> list[dict]:
+    """Per held-out truth of ``name``: its prior (``library``'s, else the generic depth prior;
+    None on a perception error), the model used and feasibility per mode."""
     p_index = problems.names().index(name)  # seeds do not depend on the --problems subset
     problem = problems.get(name)
     out = []
@@ -99,7 +119,13 @@ def _holds(args, name: str, config: PerceptionConfig) -> list[dict]:
         }
         try:
             rng = np.random.default_rng([args.seed, HELD_OUT, p_index, i, 2])
-            entry["prior"] = depth_prior(truth, config, rng).prior
+            if library is None:
+                entry["prior"], entry["model"] = depth_prior(truth, config, rng).prior, "generic"
+            else:
+                chosen, _ = learned_prior(
+                    truth, config, rng, library, None, args.min_inlier_fraction
+                )
+                entry["prior"], entry["model"] = chosen.prior, chosen.model
         except PerceptionError as err:
             entry["prior"], entry["perception_error"] = None, str(err)
         out.append(entry)
@@ -162,13 +188,17 @@ def run(args) -> dict:
     if args.instances < 1 or args.samples < 2:
         raise SystemExit("bench holds: --instances must be >= 1 and --samples >= 2")
     config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    entries = [h for name in args.problems for h in _holds(args, name, config)]
+    library, library_path, gates = None, None, None
+    if args.prior == "depth":
+        library, library_path, gates = load_library(args)
+    entries = [h for name in args.problems for h in _holds(args, name, config, library)]
     records = []
     for k, hold in enumerate(entries):
         record = {key: hold[key] for key in ("problem", "instance", "feasible")}
         if hold["prior"] is None:
             record["perception_error"] = hold["perception_error"]
         else:
+            record["model"] = hold["model"]
             record["vertices"] = hold["prior"].n_vertices
             record["modes"] = {mode: _evaluate(hold, mode, args) for mode in args.mode}
         records.append(record)
@@ -207,6 +237,10 @@ def run(args) -> dict:
             f"{1e3 * lat['median_p99']:>10.1f}"
         )
     return {
+        "prior": args.prior,
+        "terrain_classes": None if library_path is None else str(library_path.resolve()),
+        "min_inlier_fraction": gates,
+        "generic_fallbacks": sum(r.get("model") == "generic" for r in evaluated),
         "instances": args.instances,
         "samples": args.samples,
         "eval_seed": args.eval_seed,

@@ -27,11 +27,13 @@ the pooled runs lie farther from the reference runs than those lie from each oth
 (``reference_runs_mean_error_max``), the reference's own resolution.
 
 Example: ``python -m tactile_dock_ros.tools.bench posterior --problem three_ledges --instance
-19 --prior depth --cycles 3 5 7 --json out.json``. Two runs of 1000 particles took 5-14 min per
+19 --prior generic --cycles 3 5 7 --json out.json``. Two runs of 1000 particles took 5-14 min per
 cycle on three_ledges (37-115 rows; the constraint evaluations of the elliptical slice moves);
-``--quick`` runs 2 cycles with 200 particles. ``--repeats`` is not used. ``--prior learned``
-checks the sampler on the robot's prior (perception's ``prior_source: learned`` of the same
-image): its posteriors are narrow, so ``--reference rejection`` reaches several cycles.
+``--quick`` runs 2 cycles with 200 particles. ``--repeats`` is not used. ``--prior depth`` (the
+default) checks the sampler on the robot's prior (perception's ``prior_source: depth``: the
+image conditioned on the terrain class library): its posteriors are narrow, so ``--reference
+rejection`` reaches several cycles; ``--prior generic`` on the generic depth prior of the same
+image.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ import numpy as np
 
 from tactile_dock_ros.core import explore, planner, problems, reference, sampling, simulate, slides
 from tactile_dock_ros.perception.config import PerceptionConfig
+from tactile_dock_ros.perception.prior_select import prior_source
 from tactile_dock_ros.tools import package_files
 from tactile_dock_ros.tools.bench.docking import (
     DOCKING_PRIORS,
@@ -82,11 +85,13 @@ def add_replay_arguments(parser, instance: int, seed: int) -> None:
     )
     parser.add_argument(
         "--prior",
+        type=prior_source,
         default="depth",
         choices=DOCKING_PRIORS,
-        help="problem: the hand-made prior; depth: the mock camera's; learned: the same image "
-        "conditioned on the terrain class library (--terrain-classes; the generic depth prior "
-        "where the gate sends the image)",
+        help="problem: the hand-made prior; depth: the mock camera's image conditioned on the "
+        "terrain class library (--terrain-classes; the generic depth prior where the gate sends "
+        "the image); generic: the generic depth prior of the same image (learned: the earlier "
+        "name of depth)",
     )
     add_library_arguments(parser)
     parser.add_argument("--mode", default="compliant", choices=MODES)
@@ -111,17 +116,17 @@ def replay_episode(args, max_cycles: int):
     config, library = None, None
     if args.prior != "problem":
         config = PerceptionConfig.load(package_files.resolve(args.perception_config))
-    if args.prior == "learned":
+    if args.prior == "depth":
         library = load_library(args)[0]
-    depth_config = config if args.prior == "depth" else None
+    generic_config = config if args.prior == "generic" else None
     truths = _truths(
-        args, args.problem, args.instance + 1, depth_config, args.split, library, config
+        args, args.problem, args.instance + 1, generic_config, args.split, library, config
     )
     truth = truths[args.instance]
     problem = _problem(args.problem)
     shape = problem.prior if args.prior == "problem" else truth[args.prior]
     if shape is None:
-        error = truth.get("perception_error", truth.get("learned_perception_error"))
+        error = truth.get("perception_error", truth.get("generic_perception_error"))
         raise SystemExit(f"no {args.prior} prior for this truth: {error}")
     views: list[explore.CycleView] = []
     result = explore.run_episode(

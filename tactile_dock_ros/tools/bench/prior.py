@@ -1,4 +1,5 @@
-"""Calibration of the depth prior: 2-sigma coverage and proper scores, independent vs correlated.
+"""Calibration of the generic depth prior: 2-sigma coverage, proper scores, independent vs
+correlated.
 
 Terrains: ``--random`` walls of ``scenes.random_terrain`` and ``--per-problem`` ground truths of
 each benchmark problem (``sample_ground_truth``), all seen by the mock camera of
@@ -22,12 +23,12 @@ camera errors from a held-out seed stream and is what figures quote; ``train`` d
 before the option and is what the depth model was tuned on; the JSON records the split);
 ``--repeats`` is unused (nothing is timed).
 
-``--learned`` also scores what perception's ``prior_source: learned`` publishes for the same
-image (``perception.prior_select`` with the ``--terrain-classes`` library and its gates): per
-kind, the generic fallbacks, the class accuracy, the same 2-sigma band coverage of the truth
-points, and, where the class is the truth's own problem, the vertex coverage (each truth vertex
-inside its vertex's 2-D 2-sigma ellipse, 0.954 for a calibrated Gaussian: the class's vertices
-correspond to the problem's truth vertices).
+``--learned`` also scores what perception's ``prior_source: depth`` (the robot's prior) publishes
+for the same image (``perception.prior_select`` with the ``--terrain-classes`` library and its
+gates): per kind, the generic fallbacks, the class accuracy, the same 2-sigma band coverage of the
+truth points, and, where the class is the truth's own problem, the vertex coverage (each truth
+vertex inside its vertex's 2-D 2-sigma ellipse, 0.954 for a calibrated Gaussian: the class's
+vertices correspond to the problem's truth vertices).
 """
 
 from __future__ import annotations
@@ -77,7 +78,8 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--learned",
         action="store_true",
-        help="also score the learned prior (perception's prior_source: learned) of each image",
+        help="also score the terrain class library's prior (perception's prior_source: depth) "
+        "of each image",
     )
     parser.add_argument(
         "--terrain-classes",
