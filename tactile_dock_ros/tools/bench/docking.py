@@ -89,7 +89,6 @@ from . import calibration
 from .splits import add_split_argument, split_seed
 
 PRIORS = ("problem", "depth")  # the default priors (``generic`` runs when asked)
-DOCKING_PRIORS = PRIOR_SOURCES  # perception's prior_source values
 TERRAIN_CLASSES = Path("config/terrain_classes.npz")
 CLEARLY_INFEASIBLE_DEG = 1.0  # holding margin from which an infeasible truth is clearly so
 MODES = ("compliant", "non-compliant")
@@ -222,7 +221,7 @@ def add_arguments(parser) -> None:
         nargs="+",
         type=prior_source,
         default=list(PRIORS),
-        choices=DOCKING_PRIORS,
+        choices=PRIOR_SOURCES,
         help="problem: the hand-made prior; depth: the mock camera's image conditioned on the "
         "terrain class library (--terrain-classes), the robot's prior; generic: the generic depth "
         "prior of the same image (learned: the earlier name of depth)",

@@ -44,10 +44,9 @@ import numpy as np
 
 from tactile_dock_ros.core import explore, planner, problems, reference, sampling, simulate, slides
 from tactile_dock_ros.perception.config import PerceptionConfig
-from tactile_dock_ros.perception.prior_select import prior_source
+from tactile_dock_ros.perception.prior_select import PRIOR_SOURCES, prior_source
 from tactile_dock_ros.tools import package_files
 from tactile_dock_ros.tools.bench.docking import (
-    DOCKING_PRIORS,
     MODES,
     _at_least,
     _problem,
@@ -87,7 +86,7 @@ def add_replay_arguments(parser, instance: int, seed: int) -> None:
         "--prior",
         type=prior_source,
         default="depth",
-        choices=DOCKING_PRIORS,
+        choices=PRIOR_SOURCES,
         help="problem: the hand-made prior; depth: the mock camera's image conditioned on the "
         "terrain class library (--terrain-classes; the generic depth prior where the gate sends "
         "the image); generic: the generic depth prior of the same image (learned: the earlier "
